@@ -1,0 +1,100 @@
+//! Criterion benchmarks of the hot algorithms, grouped by image size.
+//!
+//! `byte_sum` reads the same buffer as the detectors and adds it up: the memory-read bound
+//! that the detectors are compared against in the same run (see BENCHMARKS.md).
+#![allow(missing_docs, clippy::unwrap_used)]
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use std::hint::black_box;
+use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine, Method};
+use xsurf_core::image::{Encoding, Image};
+use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
+use xsurf_core::pose::table_from_carm;
+use xsurf_core::rig::Rig;
+use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene};
+use xsurf_core::triangulate::{Profile, Triangulator, TriangulatorConfig};
+
+fn scanner(w: u32, h: u32, encoding: Encoding) -> Scanner {
+    let settings = ScanSettings { encoding, ..Default::default() };
+    Scanner::new(Scene::by_name("pyramid").unwrap(), Rig::study(w, h), LaserModel::default(), settings).unwrap()
+}
+
+fn edge_detection(c: &mut Criterion) {
+    for (w, h) in [(320u32, 240u32), (640, 480), (1920, 1200)] {
+        let mut g = c.benchmark_group(format!("edge_{w}x{h}"));
+        g.throughput(Throughput::Elements(u64::from(w) * u64::from(h)));
+        let s = scanner(w, h, Encoding::Mono8);
+        let img = s.render(0, s.frame_count() / 2);
+        g.bench_function("byte_sum", |b| b.iter(|| black_box(&img.data).iter().map(|&v| u64::from(v)).sum::<u64>()));
+        for m in [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic, Method::Gradient] {
+            let mut d = EdgeDetector::new(EdgeConfig { method: m, ..Default::default() }).unwrap();
+            let mut out = LaserLine::default();
+            let view = img.view().unwrap();
+            g.bench_with_input(BenchmarkId::new("mono8", m.name()), &view, |b, v| {
+                b.iter(|| d.detect(black_box(v), &mut out).unwrap())
+            });
+        }
+        let rgb = scanner(w, h, Encoding::Rgb8).render(0, s.frame_count() / 2);
+        let mut d = EdgeDetector::new(EdgeConfig::default()).unwrap();
+        let mut out = LaserLine::default();
+        let view = rgb.view().unwrap();
+        g.bench_function("rgb8/center_of_gravity", |b| b.iter(|| d.detect(black_box(&view), &mut out).unwrap()));
+        g.finish();
+    }
+}
+
+fn triangulation(c: &mut Criterion) {
+    let mut g = c.benchmark_group("triangulate_640x480");
+    let s = scanner(640, 480, Encoding::Mono8);
+    let img: Image = s.render(0, s.frame_count() / 2);
+    let mut line = LaserLine::default();
+    EdgeDetector::new(EdgeConfig::default()).unwrap().detect(&img.view().unwrap(), &mut line).unwrap();
+    let rig = Rig::study(640, 480);
+    let tri = Triangulator::new(rig.cameras[0].geometry().unwrap(), &TriangulatorConfig::default()).unwrap();
+    let mut prof = Profile::default();
+    g.throughput(Throughput::Elements(line.found() as u64));
+    let pose = table_from_carm(0.1, 0.0, 0.0);
+    g.bench_function("points", |b| b.iter(|| tri.triangulate(black_box(&line), &pose, &mut prof)));
+    g.finish();
+}
+
+/// A 480 x 390 grid (the study's full-body size) of a wavy surface with a few holes.
+fn body_grid() -> Grid {
+    let (ns, nf) = (480usize, 390usize);
+    let mut g = Grid::new(ns);
+    for f in 0..nf {
+        let y = f as f32 * 0.0047;
+        let points = (0..ns)
+            .map(|s| {
+                let x = s as f32 * 0.00125 - 0.3;
+                if (s * 7 + f * 13) % 97 == 0 {
+                    [f32::NAN; 3]
+                } else {
+                    [x, y, 0.1 * (x * 8.0).cos().max(0.0) + 0.01 * (y * 20.0).sin()]
+                }
+            })
+            .collect();
+        g.push(f as i64, &Profile { points, intensity: vec![100.0; ns], rgb: None, range: vec![0.9; ns] }).unwrap();
+    }
+    g
+}
+
+fn meshing(c: &mut Criterion) {
+    let mut g = c.benchmark_group("mesh_480x390");
+    g.sample_size(20);
+    let grid = body_grid();
+    g.throughput(Throughput::Elements(grid.points().len() as u64));
+    g.bench_function("mesh", |b| b.iter(|| mesh_grid(black_box(&grid), &MeshConfig::default())));
+    let cfg = MeshConfig { smooth_iterations: 3, ..Default::default() };
+    g.bench_function("mesh_fill_smooth3", |b| {
+        b.iter(|| {
+            let mut gg = grid.clone();
+            gg.fill_single_holes(0.01);
+            mesh_grid(&gg, &cfg)
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, edge_detection, triangulation, meshing);
+criterion_main!(benches);

@@ -1,0 +1,838 @@
+//! Sub-pixel laser-line detection, one sample per image row (or column).
+//!
+//! Every method first finds the strongest peak of the row profile (the brightest sample, which
+//! also picks the strongest of several lines), estimates the local background and noise from
+//! two flanks beside it, and accepts the peak only if it stands above the background by more than
+//! `max(min_strength, noise_factor * noise)`: the study's "floating threshold". The centre is then
+//! refined by the chosen method. A saturated peak (a plateau at the encoding's maximum) is
+//! always located by its centre of gravity, because a fit to a clipped top is biased.
+//!
+//! [`Method::Gradient`] is the reference study's method (a five-pixel gradient above a fixed
+//! threshold, integer pixels), kept so that the improvement can be measured.
+
+use crate::image::{Encoding, ImageError, ImageView};
+use serde::{Deserialize, Serialize};
+
+/// How the line centre is located within a row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// The study's method: first five-pixel rise above `gradient_threshold`, integer pixels.
+    Gradient,
+    /// Centre of gravity of the background-subtracted samples above a fraction of the peak.
+    #[default]
+    CenterOfGravity,
+    /// Weighted least-squares parabola through the logarithm of the peak (a Gaussian fit).
+    Gaussian,
+    /// Parabola through the peak sample and its two neighbours.
+    Parabolic,
+}
+
+impl Method {
+    /// Parses the parameter value (`gradient`, `center_of_gravity`/`cog`, `gaussian`, `parabolic`).
+    pub fn parse(s: &str) -> Option<Method> {
+        match s {
+            "gradient" => Some(Method::Gradient),
+            "center_of_gravity" | "cog" | "centre_of_gravity" => Some(Method::CenterOfGravity),
+            "gaussian" => Some(Method::Gaussian),
+            "parabolic" => Some(Method::Parabolic),
+            _ => None,
+        }
+    }
+    /// The parameter value naming this method.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Gradient => "gradient",
+            Method::CenterOfGravity => "center_of_gravity",
+            Method::Gaussian => "gaussian",
+            Method::Parabolic => "parabolic",
+        }
+    }
+}
+
+/// Which way the line runs in the image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Orientation {
+    /// The line runs top to bottom: one sample per image row (`LaserLine.ORIENTATION_VERTICAL`).
+    #[default]
+    Vertical,
+    /// The line runs left to right: one sample per image column.
+    Horizontal,
+}
+
+impl Orientation {
+    /// Parses `vertical` / `horizontal`.
+    pub fn parse(s: &str) -> Option<Orientation> {
+        match s {
+            "vertical" => Some(Orientation::Vertical),
+            "horizontal" => Some(Orientation::Horizontal),
+            _ => None,
+        }
+    }
+}
+
+/// Which signal of a colour image carries the laser.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Channel {
+    /// The red channel.
+    #[default]
+    Red,
+    /// Luma (0.299 R + 0.587 G + 0.114 B).
+    Luma,
+    /// Red minus the mean of green and blue, clamped at 0: suppresses white surfaces.
+    RedMinusOthers,
+}
+
+impl Channel {
+    /// Parses `red`, `luma`, `red_minus_others`.
+    pub fn parse(s: &str) -> Option<Channel> {
+        match s {
+            "red" => Some(Channel::Red),
+            "luma" => Some(Channel::Luma),
+            "red_minus_others" => Some(Channel::RedMinusOthers),
+            _ => None,
+        }
+    }
+}
+
+/// A rectangle of the image to search (pixels); zero width or height means "to the edge".
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Roi {
+    /// First column.
+    pub x_offset: u32,
+    /// First row.
+    pub y_offset: u32,
+    /// Columns (0: to the right edge).
+    pub width: u32,
+    /// Rows (0: to the bottom edge).
+    pub height: u32,
+}
+
+/// Configuration of the detector. Every field is an `edge_detector` parameter of the same name.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct EdgeConfig {
+    /// Centre-finding method.
+    pub method: Method,
+    /// Line orientation in the image.
+    pub line_orientation: Orientation,
+    /// Signal used for colour images.
+    pub channel: Channel,
+    /// Region searched.
+    pub roi: Roi,
+    /// Smallest accepted peak height above the local background, grey levels (8-bit scale;
+    /// scaled by 257 for mono16).
+    pub min_strength: f32,
+    /// The peak must also exceed this many times the local noise (standard deviation).
+    pub noise_factor: f32,
+    /// Samples above `background + peak_fraction * strength` take part in the centre estimate.
+    pub peak_fraction: f32,
+    /// Largest half-width searched around the peak, pixels.
+    pub max_half_width_px: u32,
+    /// Length of each background flank, pixels.
+    pub flank_px: u32,
+    /// Peaks wider than this (full width at half maximum, pixels) are rejected as smeared
+    /// (grazing incidence or a depth edge).
+    pub max_width_px: f32,
+    /// For `gradient`: the five-pixel rise that marks the line, grey levels.
+    pub gradient_threshold: f32,
+    /// Colour is sampled this far beside the line centre (the study's t +/- d), pixels.
+    pub color_offset_px: f32,
+}
+
+impl Default for EdgeConfig {
+    fn default() -> Self {
+        Self {
+            method: Method::CenterOfGravity,
+            line_orientation: Orientation::Vertical,
+            channel: Channel::Red,
+            roi: Roi::default(),
+            min_strength: 20.0,
+            noise_factor: 6.0,
+            peak_fraction: 0.15,
+            max_half_width_px: 12,
+            flank_px: 10,
+            max_width_px: 14.0,
+            gradient_threshold: 40.0,
+            color_offset_px: 8.0,
+        }
+    }
+}
+
+/// Why a configuration or an image was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EdgeError {
+    /// The image itself is malformed.
+    #[error(transparent)]
+    Image(#[from] ImageError),
+    /// The region of interest lies outside the image.
+    #[error("roi {roi:?} lies outside the {width}x{height} image")]
+    RoiOutside {
+        /// The region.
+        roi: Roi,
+        /// Image width.
+        width: u32,
+        /// Image height.
+        height: u32,
+    },
+    /// A configuration value is out of range.
+    #[error("invalid edge_detector parameter {name}: {reason}")]
+    InvalidConfig {
+        /// Parameter name.
+        name: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl EdgeConfig {
+    /// Checks every value; the same check refuses a bad run-time parameter set.
+    pub fn validate(&self) -> Result<(), EdgeError> {
+        let bad = |name, reason: &str| Err(EdgeError::InvalidConfig { name, reason: reason.to_string() });
+        if !(self.min_strength.is_finite() && self.min_strength >= 0.0) {
+            return bad("min_strength", "must be a finite value >= 0");
+        }
+        if !(self.noise_factor.is_finite() && self.noise_factor >= 0.0) {
+            return bad("noise_factor", "must be a finite value >= 0");
+        }
+        if !(self.peak_fraction >= 0.0 && self.peak_fraction < 1.0) {
+            return bad("peak_fraction", "must be in [0, 1)");
+        }
+        if self.max_half_width_px == 0 || self.max_half_width_px > 256 {
+            return bad("max_half_width_px", "must be in 1..=256");
+        }
+        if self.flank_px == 0 || self.flank_px > 256 {
+            return bad("flank_px", "must be in 1..=256");
+        }
+        if !(self.max_width_px > 0.0) {
+            return bad("max_width_px", "must be > 0");
+        }
+        if !(self.gradient_threshold > 0.0) {
+            return bad("gradient_threshold", "must be > 0");
+        }
+        if !(self.color_offset_px.is_finite() && self.color_offset_px >= 0.0) {
+            return bad("color_offset_px", "must be a finite value >= 0");
+        }
+        Ok(())
+    }
+}
+
+/// The laser line found in one image: the algorithm side of `xsurf_msgs/LaserLine`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LaserLine {
+    /// Orientation the samples follow.
+    pub orientation: Orientation,
+    /// Source image width.
+    pub image_width: u32,
+    /// Source image height.
+    pub image_height: u32,
+    /// Sub-pixel column of the line centre per sample, NaN where none.
+    pub u: Vec<f32>,
+    /// Sub-pixel row of the line centre per sample, NaN where none.
+    pub v: Vec<f32>,
+    /// Peak height above the local background (grey levels), 0 where none.
+    pub strength: Vec<f32>,
+    /// Full width at half maximum (pixels), 0 where none.
+    pub width: Vec<f32>,
+    /// Surface colour beside the line, 3 bytes a sample; empty for grey images.
+    pub rgb: Vec<u8>,
+}
+
+impl LaserLine {
+    /// Number of samples (rows for vertical lines, columns for horizontal).
+    pub fn len(&self) -> usize {
+        self.u.len()
+    }
+    /// True when there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.u.is_empty()
+    }
+    /// Number of samples where a line was found.
+    pub fn found(&self) -> usize {
+        self.u.iter().filter(|u| u.is_finite()).count()
+    }
+    fn reset(&mut self, orientation: Orientation, w: u32, h: u32, n: usize, color: bool) {
+        self.orientation = orientation;
+        self.image_width = w;
+        self.image_height = h;
+        for buf in [&mut self.u, &mut self.v] {
+            buf.clear();
+            buf.resize(n, f32::NAN);
+        }
+        for buf in [&mut self.strength, &mut self.width] {
+            buf.clear();
+            buf.resize(n, 0.0);
+        }
+        self.rgb.clear();
+        if color {
+            self.rgb.resize(3 * n, 0);
+        }
+    }
+}
+
+/// A sample type of a row profile.
+trait Sample: Copy + PartialOrd {
+    fn f(self) -> f32;
+}
+impl Sample for u8 {
+    #[inline(always)]
+    fn f(self) -> f32 {
+        f32::from(self)
+    }
+}
+impl Sample for f32 {
+    #[inline(always)]
+    fn f(self) -> f32 {
+        self
+    }
+}
+
+/// One located peak in a profile.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Peak {
+    pos: f32,
+    strength: f32,
+    width: f32,
+    saturated: bool,
+}
+
+/// Index of the first maximum of a byte row, in one vectorisable pass over 32-byte blocks.
+fn argmax_u8(p: &[u8]) -> Option<usize> {
+    const BLOCK: usize = 32;
+    let mut best = 0u8;
+    let mut best_block = None;
+    for (i, chunk) in p.chunks(BLOCK).enumerate() {
+        let m = chunk.iter().fold(0u8, |a, &b| a.max(b));
+        if best_block.is_none() || m > best {
+            best = m;
+            best_block = Some(i);
+        }
+    }
+    let b = best_block?;
+    let start = b * BLOCK;
+    p[start..(start + BLOCK).min(p.len())].iter().position(|&v| v == best).map(|i| start + i)
+}
+
+fn argmax_f32(p: &[f32]) -> Option<usize> {
+    let mut best: Option<(usize, f32)> = None;
+    for (i, &v) in p.iter().enumerate() {
+        if best.is_none_or(|(_, b)| v > b) {
+            best = Some((i, v));
+        }
+    }
+    best.map(|(i, _)| i)
+}
+
+/// Mean and variance of a run of samples.
+fn mean_var<S: Sample>(s: &[S]) -> Option<(f32, f32, usize)> {
+    if s.is_empty() {
+        return None;
+    }
+    let n = s.len() as f32;
+    let mean = s.iter().map(|v| v.f()).sum::<f32>() / n;
+    let var = s.iter().map(|v| (v.f() - mean).powi(2)).sum::<f32>() / n;
+    Some((mean, var, s.len()))
+}
+
+/// Background level and noise around a peak at `m`, from flanks outside `±gap`.
+fn background<S: Sample>(p: &[S], m: usize, gap: usize, flank: usize) -> (f32, f32) {
+    let left = m.checked_sub(gap + 1).map(|end| &p[end.saturating_sub(flank - 1)..=end]);
+    let right = (m + gap + 1 < p.len()).then(|| &p[m + gap + 1..(m + gap + 1 + flank).min(p.len())]);
+    let l = left.and_then(mean_var);
+    let r = right.and_then(mean_var);
+    match (l, r) {
+        (Some((ml, vl, nl)), Some((mr, vr, nr))) => {
+            let n = (nl + nr) as f32;
+            ((ml * nl as f32 + mr * nr as f32) / n, ((vl * nl as f32 + vr * nr as f32) / n).sqrt())
+        }
+        (Some((m, v, _)), None) | (None, Some((m, v, _))) => (m, v.sqrt()),
+        (None, None) => (0.0, 0.0),
+    }
+}
+
+/// Linear-interpolated position where the profile crosses `level` between `i` (below) and `j`.
+fn crossing<S: Sample>(p: &[S], i: usize, j: usize, level: f32) -> f32 {
+    let (a, b) = (p[i].f(), p[j].f());
+    let t = if (b - a).abs() > f32::EPSILON { (level - a) / (b - a) } else { 0.5 };
+    i as f32 + (j as f32 - i as f32) * t.clamp(0.0, 1.0)
+}
+
+/// The samples' scale relative to 8-bit grey levels.
+fn level_scale(encoding: Encoding) -> f32 {
+    if encoding == Encoding::Mono16 {
+        257.0
+    } else {
+        1.0
+    }
+}
+
+/// Locates the strongest line in one profile with a sub-pixel method.
+fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturation: f32) -> Option<Peak> {
+    let n = p.len();
+    let peak = p[m].f();
+    let max_hw = cfg.max_half_width_px as usize;
+    // First pass: the run above half of the peak over the row minimum nearby gives the gap
+    // that keeps the background flanks off the line.
+    let (bg0, _) = background(p, m, max_hw.min(4), cfg.flank_px as usize);
+    let half0 = bg0 + 0.5 * (peak - bg0);
+    let mut lo = m;
+    while lo > 0 && m - lo < max_hw && p[lo - 1].f() > half0 {
+        lo -= 1;
+    }
+    let mut hi = m;
+    while hi + 1 < n && hi - m < max_hw && p[hi + 1].f() > half0 {
+        hi += 1;
+    }
+    let gap = (2 * (m - lo).max(hi - m) + 2).min(max_hw);
+    let (bg, noise) = background(p, m, gap, cfg.flank_px as usize);
+    let strength = peak - bg;
+    if strength < (cfg.min_strength * scale).max(cfg.noise_factor * noise) || strength <= 0.0 {
+        return None;
+    }
+    // Full width at half maximum.
+    let half = bg + 0.5 * strength;
+    let mut l = m;
+    while l > 0 && m - l <= max_hw && p[l - 1].f() > half {
+        l -= 1;
+    }
+    let mut r = m;
+    while r + 1 < n && r - m <= max_hw && p[r + 1].f() > half {
+        r += 1;
+    }
+    let left = if l > 0 { crossing(p, l - 1, l, half) } else { l as f32 - 0.5 };
+    let right = if r + 1 < n { crossing(p, r + 1, r, half) } else { r as f32 + 0.5 };
+    let width = right - left;
+    if width > cfg.max_width_px || m - l > max_hw || r - m > max_hw {
+        return None;
+    }
+    let saturated = peak >= saturation;
+    let pos = match cfg.method {
+        Method::Parabolic if !saturated && m > 0 && m + 1 < n => {
+            let (a, b, c) = (p[m - 1].f(), peak, p[m + 1].f());
+            let den = a - 2.0 * b + c;
+            if den < 0.0 {
+                m as f32 + (0.5 * (a - c) / den).clamp(-0.5, 0.5)
+            } else {
+                m as f32
+            }
+        }
+        Method::Gaussian if !saturated => gaussian_fit(p, m, bg, strength, cfg)?,
+        _ => center_of_gravity(p, m, bg + cfg.peak_fraction * strength, max_hw)?,
+    };
+    Some(Peak { pos, strength, width, saturated })
+}
+
+/// Centre of gravity of the contiguous run around `m` above `threshold`.
+fn center_of_gravity<S: Sample>(p: &[S], m: usize, threshold: f32, max_hw: usize) -> Option<f32> {
+    let mut lo = m;
+    while lo > 0 && m - lo < max_hw && p[lo - 1].f() > threshold {
+        lo -= 1;
+    }
+    let mut hi = m;
+    while hi + 1 < p.len() && hi - m < max_hw && p[hi + 1].f() > threshold {
+        hi += 1;
+    }
+    let (mut sw, mut swx) = (0.0f32, 0.0f32);
+    for (i, v) in p[lo..=hi].iter().enumerate() {
+        let w = v.f() - threshold;
+        if w > 0.0 {
+            sw += w;
+            swx += w * i as f32;
+        }
+    }
+    (sw > 0.0).then(|| lo as f32 + swx / sw)
+}
+
+/// Gaussian fit: weighted least-squares parabola through ln(sample - background) around `m`,
+/// weights (sample - background)^2 (Caruana's method), over samples above `peak_fraction`.
+fn gaussian_fit<S: Sample>(p: &[S], m: usize, bg: f32, strength: f32, cfg: &EdgeConfig) -> Option<f32> {
+    let floor = cfg.peak_fraction.max(0.05) * strength;
+    let max_hw = cfg.max_half_width_px as usize;
+    let mut lo = m;
+    while lo > 0 && m - lo < max_hw && p[lo - 1].f() - bg > floor {
+        lo -= 1;
+    }
+    let mut hi = m;
+    while hi + 1 < p.len() && hi - m < max_hw && p[hi + 1].f() - bg > floor {
+        hi += 1;
+    }
+    if hi - lo < 2 {
+        // Fewer than three samples: a three-point log-parabola needs its neighbours.
+        lo = m.checked_sub(1)?;
+        hi = (m + 1).min(p.len() - 1);
+        if hi - lo < 2 {
+            return None;
+        }
+    }
+    // Normal equations of sum w (a + b x + c x^2 - ln y)^2, x relative to m.
+    let mut s = [0.0f64; 5];
+    let mut t = [0.0f64; 3];
+    for i in lo..=hi {
+        let y = f64::from((p[i].f() - bg).max(1e-3));
+        let w = y * y;
+        let x = i as f64 - m as f64;
+        let ly = y.ln();
+        let mut xp = 1.0;
+        for sk in s.iter_mut() {
+            *sk += w * xp;
+            xp *= x;
+        }
+        t[0] += w * ly;
+        t[1] += w * ly * x;
+        t[2] += w * ly * x * x;
+    }
+    let a = [[s[0], s[1], s[2]], [s[1], s[2], s[3]], [s[2], s[3], s[4]]];
+    let sol = solve3(a, t)?;
+    let (b, c) = (sol[1], sol[2]);
+    if c >= 0.0 {
+        return None;
+    }
+    let off = (-b / (2.0 * c)).clamp(-(max_hw as f64), max_hw as f64);
+    Some((m as f64 + off) as f32)
+}
+
+/// Solves a 3x3 linear system by Cramer's rule; `None` when singular.
+fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
+    let det = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(&a);
+    if !d.is_finite() || d.abs() < 1e-12 {
+        return None;
+    }
+    let mut out = [0.0; 3];
+    for (k, o) in out.iter_mut().enumerate() {
+        let mut ak = a;
+        for r in 0..3 {
+            ak[r][k] = b[r];
+        }
+        *o = det(&ak) / d;
+    }
+    Some(out)
+}
+
+/// The study's method: first rise over five samples above the threshold; integer position.
+fn gradient_edge<S: Sample>(p: &[S], threshold: f32) -> Option<Peak> {
+    (0..p.len().saturating_sub(4))
+        .map(|i| (i, p[i + 4].f() - p[i].f()))
+        .find(|&(_, g)| g > threshold)
+        .map(|(i, g)| Peak { pos: (i + 2) as f32, strength: g, width: 0.0, saturated: false })
+}
+
+/// Counters of one detection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DetectStats {
+    /// Samples searched.
+    pub searched: u32,
+    /// Samples with a line.
+    pub found: u32,
+    /// Samples whose peak was saturated.
+    pub saturated: u32,
+}
+
+/// A reusable detector: owns its scratch buffers so that the hot path does not allocate.
+#[derive(Debug, Default, Clone)]
+pub struct EdgeDetector {
+    config: EdgeConfig,
+    profile: Vec<f32>,
+}
+
+impl EdgeDetector {
+    /// A detector with a validated configuration.
+    pub fn new(config: EdgeConfig) -> Result<Self, EdgeError> {
+        config.validate()?;
+        Ok(Self { config, profile: Vec::new() })
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &EdgeConfig {
+        &self.config
+    }
+
+    /// Finds the line in `image`, writing one sample per row (or column) into `out`.
+    pub fn detect(&mut self, image: &ImageView<'_>, out: &mut LaserLine) -> Result<DetectStats, EdgeError> {
+        let cfg = &self.config;
+        let (w, h) = (image.width(), image.height());
+        let roi = cfg.roi;
+        if roi.x_offset >= w || roi.y_offset >= h {
+            return Err(EdgeError::RoiOutside { roi, width: w, height: h });
+        }
+        let x1 = if roi.width == 0 { w } else { (roi.x_offset + roi.width).min(w) };
+        let y1 = if roi.height == 0 { h } else { (roi.y_offset + roi.height).min(h) };
+        let (x0, y0) = (roi.x_offset, roi.y_offset);
+        let enc = image.encoding();
+        let vertical = cfg.line_orientation == Orientation::Vertical;
+        let samples = if vertical { h } else { w };
+        out.reset(cfg.line_orientation, w, h, samples as usize, enc.is_color());
+        let scale = level_scale(enc);
+        let saturation = enc.max_value();
+        let mut stats = DetectStats::default();
+        let (outer, inner) = if vertical { (y0..y1, x0..x1) } else { (x0..x1, y0..y1) };
+        for s in outer {
+            stats.searched += 1;
+            let peak = if vertical && enc == Encoding::Mono8 {
+                let row = &image.row(s)[inner.start as usize..inner.end as usize];
+                locate(row, argmax_u8(row), cfg, scale, saturation)
+            } else {
+                fill_profile(image, s, inner.clone(), vertical, cfg.channel, &mut self.profile);
+                let p = &self.profile[..];
+                locate(p, argmax_f32(p), cfg, scale, saturation)
+            };
+            let Some(peak) = peak else { continue };
+            let pos = inner.start as f32 + peak.pos;
+            let (u, v) = if vertical { (pos, s as f32) } else { (s as f32, pos) };
+            let i = s as usize;
+            out.u[i] = u;
+            out.v[i] = v;
+            out.strength[i] = peak.strength / scale;
+            out.width[i] = peak.width;
+            stats.found += 1;
+            stats.saturated += u32::from(peak.saturated);
+            if enc.is_color() {
+                let c = side_colour(image, u, v, vertical, cfg.color_offset_px);
+                out.rgb[3 * i..3 * i + 3].copy_from_slice(&c);
+            }
+        }
+        Ok(stats)
+    }
+}
+
+fn locate<S: Sample>(p: &[S], m: Option<usize>, cfg: &EdgeConfig, scale: f32, saturation: f32) -> Option<Peak> {
+    if cfg.method == Method::Gradient {
+        return gradient_edge(p, cfg.gradient_threshold * scale);
+    }
+    find_peak(p, m?, cfg, scale, saturation)
+}
+
+/// Copies one row or column of the chosen signal into `buf` as f32.
+fn fill_profile(
+    image: &ImageView<'_>,
+    s: u32,
+    inner: std::ops::Range<u32>,
+    vertical: bool,
+    channel: Channel,
+    buf: &mut Vec<f32>,
+) {
+    buf.clear();
+    let enc = image.encoding();
+    let value = |x: u32, y: u32| -> f32 {
+        let row = image.row(y);
+        let x = x as usize;
+        match enc {
+            Encoding::Mono8 => f32::from(row[x]),
+            Encoding::Mono16 => {
+                let b = [row[2 * x], row[2 * x + 1]];
+                f32::from(if image.is_big_endian() { u16::from_be_bytes(b) } else { u16::from_le_bytes(b) })
+            }
+            Encoding::Rgb8 | Encoding::Bgr8 => {
+                let px = &row[3 * x..3 * x + 3];
+                let (r, g, b) = if enc == Encoding::Rgb8 { (px[0], px[1], px[2]) } else { (px[2], px[1], px[0]) };
+                let (r, g, b) = (f32::from(r), f32::from(g), f32::from(b));
+                match channel {
+                    Channel::Red => r,
+                    Channel::Luma => 0.299 * r + 0.587 * g + 0.114 * b,
+                    Channel::RedMinusOthers => (r - 0.5 * (g + b)).max(0.0),
+                }
+            }
+        }
+    };
+    if vertical {
+        buf.extend(inner.map(|x| value(x, s)));
+    } else {
+        buf.extend(inner.map(|y| value(s, y)));
+    }
+}
+
+/// Mean colour at `offset` pixels either side of the line centre, across the line.
+fn side_colour(image: &ImageView<'_>, u: f32, v: f32, vertical: bool, offset: f32) -> [u8; 3] {
+    let mut acc = [0u32; 3];
+    let mut n = 0;
+    for sign in [-1.0f32, 1.0] {
+        let (x, y) = if vertical { (u + sign * offset, v) } else { (u, v + sign * offset) };
+        let (x, y) = (x.round(), y.round());
+        if x < 0.0 || y < 0.0 || x >= image.width() as f32 || y >= image.height() as f32 {
+            continue;
+        }
+        let c = image.rgb_at(x as u32, y as u32);
+        for k in 0..3 {
+            acc[k] += u32::from(c[k]);
+        }
+        n += 1;
+    }
+    if n == 0 {
+        return [0; 3];
+    }
+    [(acc[0] / n) as u8, (acc[1] / n) as u8, (acc[2] / n) as u8]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Image;
+
+    /// A mono8 image with a vertical Gaussian line at column `c` (box-integrated over each pixel).
+    fn line_image(w: u32, h: u32, c: f64, sigma: f64, amp: f64, bg: f64) -> Image {
+        let mut img = Image::new(w, h, Encoding::Mono8);
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = 0.0;
+                for k in 0..16 {
+                    let xs = x as f64 - 0.5 + (k as f64 + 0.5) / 16.0;
+                    acc += (-(xs - c).powi(2) / (2.0 * sigma * sigma)).exp();
+                }
+                let val = bg + amp * acc / 16.0;
+                img.data[(y * w + x) as usize] = val.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        img
+    }
+
+    fn detect(img: &Image, cfg: EdgeConfig) -> LaserLine {
+        let mut d = EdgeDetector::new(cfg).unwrap();
+        let mut out = LaserLine::default();
+        d.detect(&img.view().unwrap(), &mut out).unwrap();
+        out
+    }
+
+    #[test]
+    fn constant_image_has_no_line() {
+        let mut img = Image::new(64, 8, Encoding::Mono8);
+        img.data.fill(120);
+        for m in [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic, Method::Gradient] {
+            let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+            assert_eq!(out.found(), 0, "{m:?}");
+            assert_eq!(out.len(), 8);
+            assert!(out.u.iter().all(|u| u.is_nan()));
+        }
+    }
+
+    #[test]
+    fn gaussian_line_found_within_005_px() {
+        for m in [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic] {
+            for k in 0..10 {
+                let c = 30.0 + k as f64 * 0.1 + 0.013;
+                let img = line_image(64, 2, c, 1.6, 200.0, 20.0);
+                let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+                let err = (f64::from(out.u[0]) - c).abs();
+                assert!(err < 0.05, "{m:?} at {c}: found {} (err {err})", out.u[0]);
+                let fwhm = 2.3548 * 1.6;
+                assert!((f64::from(out.width[0]) - fwhm).abs() < 0.3, "{m:?} width {}", out.width[0]);
+                assert!((out.strength[0] - 200.0).abs() < 15.0, "strength {}", out.strength[0]);
+            }
+        }
+    }
+
+    #[test]
+    fn gradient_method_is_integer_and_on_the_rising_edge() {
+        let img = line_image(64, 1, 30.37, 1.6, 200.0, 20.0);
+        let out = detect(&img, EdgeConfig { method: Method::Gradient, ..Default::default() });
+        let u = out.u[0];
+        assert_eq!(u, u.round());
+        assert!((25.0..30.37).contains(&u), "{u}");
+    }
+
+    #[test]
+    fn saturated_line_is_centred() {
+        let img = line_image(64, 1, 40.3, 2.0, 600.0, 10.0);
+        assert!(img.data.iter().filter(|&&v| v == 255).count() > 2);
+        for m in [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic] {
+            let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+            assert!((out.u[0] - 40.3).abs() < 0.05, "{m:?}: {}", out.u[0]);
+        }
+    }
+
+    #[test]
+    fn strongest_of_two_peaks_is_chosen() {
+        let a = line_image(100, 1, 25.2, 1.5, 90.0, 10.0);
+        let b = line_image(100, 1, 70.6, 1.5, 180.0, 0.0);
+        let mut img = a.clone();
+        for (d, s) in img.data.iter_mut().zip(&b.data) {
+            *d = d.saturating_add(*s);
+        }
+        let out = detect(&img, EdgeConfig::default());
+        assert!((out.u[0] - 70.6).abs() < 0.05, "{}", out.u[0]);
+    }
+
+    #[test]
+    fn dim_line_over_noise_found_and_noise_alone_not() {
+        // Deterministic pseudo-noise of +-3 grey levels, a line of 25 levels.
+        let mut img = line_image(200, 1, 120.4, 1.5, 25.0, 40.0);
+        let mut s = 12345u32;
+        let mut noisy = img.clone();
+        for d in noisy.data.iter_mut() {
+            s = s.wrapping_mul(1664525).wrapping_add(1013904223);
+            *d = (i32::from(*d) + (s >> 29) as i32 - 3).clamp(0, 255) as u8;
+        }
+        let out = detect(&noisy, EdgeConfig::default());
+        assert!((out.u[0] - 120.4).abs() < 0.3, "{}", out.u[0]);
+        img.data = noisy.data.iter().zip(&img.data).map(|(n, c)| n.wrapping_sub(*c).wrapping_add(40)).collect();
+        let out = detect(&img, EdgeConfig::default());
+        assert_eq!(out.found(), 0);
+    }
+
+    #[test]
+    fn horizontal_orientation_and_roi() {
+        let img = line_image(16, 40, 7.25, 1.5, 200.0, 0.0);
+        // Transpose into a horizontal line at row 7.25.
+        let mut t = Image::new(40, 16, Encoding::Mono8);
+        for y in 0..40u32 {
+            for x in 0..16u32 {
+                t.data[(x * 40 + y) as usize] = img.data[(y * 16 + x) as usize];
+            }
+        }
+        let cfg = EdgeConfig {
+            line_orientation: Orientation::Horizontal,
+            roi: Roi { x_offset: 5, y_offset: 0, width: 10, height: 0 },
+            ..Default::default()
+        };
+        let out = detect(&t, cfg);
+        assert_eq!(out.len(), 40);
+        assert_eq!(out.found(), 10);
+        assert!(out.u[4].is_nan() && out.u[15].is_nan());
+        assert!((out.v[7] - 7.25).abs() < 0.05 && out.u[7] == 7.0);
+    }
+
+    #[test]
+    fn colour_channels_and_side_colour() {
+        let grey = line_image(80, 1, 40.0, 1.5, 150.0, 0.0);
+        let mut img = Image::new(80, 1, Encoding::Bgr8);
+        for (i, &g) in grey.data.iter().enumerate() {
+            // A white-ish surface (B=G=R=90) with a red laser on top.
+            img.data[3 * i] = 90;
+            img.data[3 * i + 1] = 90;
+            img.data[3 * i + 2] = 90u8.saturating_add(g);
+        }
+        for ch in [Channel::Red, Channel::Luma, Channel::RedMinusOthers] {
+            let out = detect(&img, EdgeConfig { channel: ch, ..Default::default() });
+            assert!((out.u[0] - 40.0).abs() < 0.05, "{ch:?} {}", out.u[0]);
+            assert_eq!(&out.rgb[..], &[90, 90, 90]);
+        }
+    }
+
+    #[test]
+    fn mono16_scaled_thresholds() {
+        let g = line_image(64, 1, 20.6, 1.5, 200.0, 10.0);
+        let mut img = Image::new(64, 1, Encoding::Mono16);
+        for (i, &v) in g.data.iter().enumerate() {
+            img.data[2 * i..2 * i + 2].copy_from_slice(&(u16::from(v) * 257).to_le_bytes());
+        }
+        let out = detect(&img, EdgeConfig::default());
+        assert!((out.u[0] - 20.6).abs() < 0.05);
+        assert!((out.strength[0] - 190.0).abs() < 15.0, "{}", out.strength[0]);
+    }
+
+    #[test]
+    fn bad_config_and_roi_are_typed_errors() {
+        assert!(EdgeDetector::new(EdgeConfig { peak_fraction: 1.5, ..Default::default() }).is_err());
+        assert!(EdgeDetector::new(EdgeConfig { min_strength: f32::NAN, ..Default::default() }).is_err());
+        let img = Image::new(10, 10, Encoding::Mono8);
+        let mut d =
+            EdgeDetector::new(EdgeConfig { roi: Roi { x_offset: 20, ..Default::default() }, ..Default::default() })
+                .unwrap();
+        let mut out = LaserLine::default();
+        assert!(matches!(d.detect(&img.view().unwrap(), &mut out), Err(EdgeError::RoiOutside { .. })));
+    }
+}

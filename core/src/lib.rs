@@ -1,0 +1,38 @@
+//! # xsurf-core
+//!
+//! The pure algorithms of xsurf, free of middleware and I/O so that they are tested and
+//! benchmarked alone:
+//!
+//! - [`edge`]: sub-pixel laser-line detection per image row or column;
+//! - [`triangulate`]: camera ray / laser plane intersection, placed in `table` by the C-arm pose;
+//! - [`pose`]: `table -> carm` over time, interpolated at image stamps;
+//! - [`mesh`]: the organized grid (samples x frames) and its triangulation and smoothing;
+//! - [`synth`]: the synthetic scanner, which renders scans and knows the true surface;
+//! - [`eval`]: accuracy and coverage against that truth.
+//!
+//! ```
+//! use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine};
+//! use xsurf_core::image::{Encoding, Image};
+//!
+//! // A 32x1 image with a bright line centred on column 12.
+//! let mut img = Image::new(32, 1, Encoding::Mono8);
+//! for (x, v) in img.data.iter_mut().enumerate() {
+//!     *v = (10.0 + 200.0 * (-((x as f32 - 12.0).powi(2)) / 4.5).exp()) as u8;
+//! }
+//! let mut detector = EdgeDetector::new(EdgeConfig::default()).unwrap();
+//! let mut line = LaserLine::default();
+//! detector.detect(&img.view().unwrap(), &mut line).unwrap();
+//! assert!((line.u[0] - 12.0).abs() < 0.05);
+//! ```
+#![deny(missing_docs)]
+
+pub mod camera;
+pub mod edge;
+pub mod eval;
+pub mod geom;
+pub mod image;
+pub mod mesh;
+pub mod pose;
+pub mod rig;
+pub mod synth;
+pub mod triangulate;

@@ -1,0 +1,476 @@
+//! The organized grid (samples x frames) and its triangulation into a surface mesh.
+//!
+//! Triangles are made only between grid neighbours, so the mesh grows with the scan and never
+//! bridges a deliberate hole. A triangle is kept when every edge passes the length limit
+//! (`max_edge_m + max_edge_per_m * range`, the depth-dependent term of PCL's OrganizedFastMesh)
+//! and its smallest angle reaches `min_angle_deg` (the study's 12 degrees).
+
+use crate::triangulate::Profile;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+
+/// The organized point grid of one camera for one scan: column `c` is frame `c`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Grid {
+    samples: usize,
+    points: Vec<[f32; 3]>,
+    intensity: Vec<f32>,
+    range: Vec<f32>,
+    rgb: Vec<u32>,
+    has_rgb: bool,
+    stamps_ns: Vec<i64>,
+}
+
+impl Grid {
+    /// An empty grid with `samples` points per frame.
+    pub fn new(samples: usize) -> Self {
+        Self { samples, ..Default::default() }
+    }
+    /// Points per frame (the cloud's `height`).
+    pub fn samples(&self) -> usize {
+        self.samples
+    }
+    /// Frames so far (the cloud's `width`).
+    pub fn frames(&self) -> usize {
+        self.points.len().checked_div(self.samples).unwrap_or(0)
+    }
+    /// True if colour has been recorded.
+    pub fn has_rgb(&self) -> bool {
+        self.has_rgb
+    }
+    /// Appends one frame. A profile of another length is an error (its sample count is returned).
+    pub fn push(&mut self, stamp_ns: i64, p: &Profile) -> Result<(), usize> {
+        if self.samples == 0 && self.points.is_empty() {
+            self.samples = p.points.len();
+        }
+        if p.points.len() != self.samples || p.intensity.len() != self.samples || p.range.len() != self.samples {
+            return Err(p.points.len());
+        }
+        self.points.extend_from_slice(&p.points);
+        self.intensity.extend_from_slice(&p.intensity);
+        self.range.extend_from_slice(&p.range);
+        match &p.rgb {
+            Some(c) if c.len() == self.samples => {
+                self.has_rgb = true;
+                self.rgb.extend_from_slice(c);
+            }
+            _ => self.rgb.extend(std::iter::repeat_n(0, self.samples)),
+        }
+        self.stamps_ns.push(stamp_ns);
+        Ok(())
+    }
+    /// Point at sample `s` of frame `f`.
+    pub fn point(&self, s: usize, f: usize) -> [f32; 3] {
+        self.points[f * self.samples + s]
+    }
+    /// Points, frame-major (`index = frame * samples + sample`).
+    pub fn points(&self) -> &[[f32; 3]] {
+        &self.points
+    }
+    /// Laser strength, frame-major.
+    pub fn intensity(&self) -> &[f32] {
+        &self.intensity
+    }
+    /// Colours 0x00RRGGBB, frame-major (0 when unknown).
+    pub fn rgb(&self) -> &[u32] {
+        &self.rgb
+    }
+    /// Camera distances, frame-major.
+    pub fn range(&self) -> &[f32] {
+        &self.range
+    }
+    /// Image stamps of the frames.
+    pub fn stamps_ns(&self) -> &[i64] {
+        &self.stamps_ns
+    }
+    /// Number of finite points.
+    pub fn valid(&self) -> usize {
+        self.points.iter().filter(|p| p[0].is_finite()).count()
+    }
+
+    /// Fills isolated single missing points (along a frame or across frames) by averaging the two
+    /// neighbours when they are closer than `max_gap_m`; larger holes are kept. Returns how many
+    /// points were filled.
+    pub fn fill_single_holes(&mut self, max_gap_m: f32) -> usize {
+        let (ns, nf) = (self.samples, self.frames());
+        let mut fills = Vec::new();
+        for f in 0..nf {
+            for s in 0..ns {
+                if self.point(s, f)[0].is_finite() {
+                    continue;
+                }
+                let pairs = [
+                    (s > 0 && s + 1 < ns).then(|| ((s - 1, f), (s + 1, f))),
+                    (f > 0 && f + 1 < nf).then(|| ((s, f - 1), (s, f + 1))),
+                ];
+                for ((s0, f0), (s1, f1)) in pairs.into_iter().flatten() {
+                    let (a, b) = (self.point(s0, f0), self.point(s1, f1));
+                    if a[0].is_finite() && b[0].is_finite() && dist(a, b) <= max_gap_m {
+                        let i0 = f0 * ns + s0;
+                        let i1 = f1 * ns + s1;
+                        fills.push((f * ns + s, mid(a, b), i0, i1));
+                        break;
+                    }
+                }
+            }
+        }
+        for &(i, p, i0, i1) in &fills {
+            self.points[i] = p;
+            self.intensity[i] = 0.5 * (self.intensity[i0] + self.intensity[i1]);
+            self.range[i] = 0.5 * (self.range[i0] + self.range[i1]);
+            self.rgb[i] = avg_rgb(self.rgb[i0], self.rgb[i1]);
+        }
+        fills.len()
+    }
+}
+
+fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+fn mid(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [(a[0] + b[0]) * 0.5, (a[1] + b[1]) * 0.5, (a[2] + b[2]) * 0.5]
+}
+fn avg_rgb(a: u32, b: u32) -> u32 {
+    let ch = |v: u32, sh: u32| (v >> sh) & 0xff;
+    (((ch(a, 16) + ch(b, 16)) / 2) << 16) | (((ch(a, 8) + ch(b, 8)) / 2) << 8) | ((ch(a, 0) + ch(b, 0)) / 2)
+}
+
+/// Configuration of the mesher (parameters of the `mesher` node).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct MeshConfig {
+    /// Longest triangle edge at zero range, metres.
+    pub max_edge_m: f32,
+    /// Extra edge length allowed per metre of camera range (PCL's depth-dependent term).
+    pub max_edge_per_m: f32,
+    /// Smallest angle a triangle may have, degrees (the study used 12).
+    pub min_angle_deg: f32,
+    /// Fill isolated single missing points before meshing.
+    pub fill_single_holes: bool,
+    /// Laplacian smoothing iterations (0: none); boundary vertices stay fixed.
+    pub smooth_iterations: u32,
+    /// Laplacian step (0..1].
+    pub smooth_lambda: f32,
+}
+
+impl Default for MeshConfig {
+    fn default() -> Self {
+        Self {
+            max_edge_m: 0.012,
+            max_edge_per_m: 0.0,
+            min_angle_deg: 12.0,
+            fill_single_holes: true,
+            smooth_iterations: 0,
+            smooth_lambda: 0.5,
+        }
+    }
+}
+
+impl MeshConfig {
+    /// Checks every value.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.max_edge_m > 0.0 && self.max_edge_m.is_finite()) {
+            return Err(format!("max_edge_m must be > 0, got {}", self.max_edge_m));
+        }
+        if !(self.max_edge_per_m >= 0.0 && self.max_edge_per_m.is_finite()) {
+            return Err(format!("max_edge_per_m must be >= 0, got {}", self.max_edge_per_m));
+        }
+        if !(0.0..60.0).contains(&self.min_angle_deg) {
+            return Err(format!("min_angle_deg must be in [0, 60), got {}", self.min_angle_deg));
+        }
+        if !(self.smooth_lambda > 0.0 && self.smooth_lambda <= 1.0) {
+            return Err(format!("smooth_lambda must be in (0, 1], got {}", self.smooth_lambda));
+        }
+        Ok(())
+    }
+}
+
+/// A triangle mesh with per-vertex attributes.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Mesh {
+    /// Vertex positions (metres, `table`).
+    pub positions: Vec<[f32; 3]>,
+    /// Unit vertex normals (same length as positions once computed).
+    pub normals: Vec<[f32; 3]>,
+    /// Vertex colours (same length as positions).
+    pub colors: Vec<[u8; 3]>,
+    /// Triangles, counter-clockwise seen from the side the normals point to.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Mesh {
+    /// Appends another mesh (indices shifted).
+    pub fn append(&mut self, other: &Mesh) {
+        let base = self.positions.len() as u32;
+        self.positions.extend_from_slice(&other.positions);
+        self.normals.extend_from_slice(&other.normals);
+        self.colors.extend_from_slice(&other.colors);
+        self.triangles.extend(other.triangles.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+    }
+
+    /// Area-weighted vertex normals.
+    pub fn compute_normals(&mut self) {
+        let mut acc = vec![[0.0f64; 3]; self.positions.len()];
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| self.positions[i as usize]);
+            let n = cross(sub(b, a), sub(c, a));
+            for &i in t {
+                for k in 0..3 {
+                    acc[i as usize][k] += f64::from(n[k]);
+                }
+            }
+        }
+        self.normals = acc
+            .iter()
+            .map(|n| {
+                let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                if l > 0.0 {
+                    [(n[0] / l) as f32, (n[1] / l) as f32, (n[2] / l) as f32]
+                } else {
+                    [0.0, 0.0, 1.0]
+                }
+            })
+            .collect();
+    }
+
+    /// Laplacian smoothing: each interior vertex moves `lambda` of the way to the mean of its
+    /// neighbours, `iterations` times; vertices on a boundary edge stay put.
+    pub fn smooth(&mut self, iterations: u32, lambda: f32) {
+        if iterations == 0 || self.triangles.is_empty() {
+            return;
+        }
+        let n = self.positions.len();
+        let mut edge_use: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 2);
+        for t in &self.triangles {
+            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+                *edge_use.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            }
+        }
+        let mut boundary = vec![false; n];
+        let mut degree = vec![0u32; n];
+        for (&(a, b), &c) in &edge_use {
+            if c == 1 {
+                boundary[a as usize] = true;
+                boundary[b as usize] = true;
+            }
+            degree[a as usize] += 1;
+            degree[b as usize] += 1;
+        }
+        // Compressed adjacency.
+        let mut start = vec![0usize; n + 1];
+        for i in 0..n {
+            start[i + 1] = start[i] + degree[i] as usize;
+        }
+        let mut fill = start.clone();
+        let mut adj = vec![0u32; start[n]];
+        for &(a, b) in edge_use.keys() {
+            adj[fill[a as usize]] = b;
+            fill[a as usize] += 1;
+            adj[fill[b as usize]] = a;
+            fill[b as usize] += 1;
+        }
+        let mut next = self.positions.clone();
+        for _ in 0..iterations {
+            for i in 0..n {
+                let nb = &adj[start[i]..start[i + 1]];
+                if boundary[i] || nb.is_empty() {
+                    continue;
+                }
+                let mut m = [0.0f32; 3];
+                for &j in nb {
+                    let p = self.positions[j as usize];
+                    for k in 0..3 {
+                        m[k] += p[k];
+                    }
+                }
+                let p = self.positions[i];
+                for k in 0..3 {
+                    next[i][k] = p[k] + lambda * (m[k] / nb.len() as f32 - p[k]);
+                }
+            }
+            std::mem::swap(&mut self.positions, &mut next);
+            next.copy_from_slice(&self.positions);
+        }
+    }
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Colour of a vertex without camera colour: grey from the laser strength.
+fn grey_from_intensity(i: f32) -> [u8; 3] {
+    let g = (90.0 + i.clamp(0.0, 255.0) * 0.6) as u8;
+    [g, g, g]
+}
+
+/// Triangulates an organized grid into a mesh (vertices are the grid's finite points).
+pub fn mesh_grid(grid: &Grid, cfg: &MeshConfig) -> Mesh {
+    let (ns, nf) = (grid.samples(), grid.frames());
+    let mut index = vec![u32::MAX; grid.points().len()];
+    let mut mesh = Mesh::default();
+    for (i, p) in grid.points().iter().enumerate() {
+        if p[0].is_finite() {
+            index[i] = mesh.positions.len() as u32;
+            mesh.positions.push(*p);
+            mesh.colors.push(if grid.has_rgb() {
+                let c = grid.rgb()[i];
+                [(c >> 16) as u8, (c >> 8) as u8, c as u8]
+            } else {
+                grey_from_intensity(grid.intensity()[i])
+            });
+        }
+    }
+    let sin_min = cfg.min_angle_deg.to_radians().sin();
+    let limit = |i: usize| cfg.max_edge_m + cfg.max_edge_per_m * grid.range()[i].max(0.0);
+    let pts = grid.points();
+    // Accept a triangle of grid indices if its edges and angles pass.
+    let ok = |a: usize, b: usize, c: usize| -> bool {
+        let (pa, pb, pc) = (pts[a], pts[b], pts[c]);
+        let lim = limit(a).min(limit(b)).min(limit(c));
+        let (ab, bc, ca) = (dist(pa, pb), dist(pb, pc), dist(pc, pa));
+        if ab > lim || bc > lim || ca > lim {
+            return false;
+        }
+        // Smallest angle is opposite the shortest edge: sin = 2*area / (product of the other two).
+        let area2 = {
+            let n = cross(sub(pb, pa), sub(pc, pa));
+            dot(n, n).sqrt()
+        };
+        let (e1, e2) = if ab <= bc && ab <= ca {
+            (bc, ca)
+        } else if bc <= ca {
+            (ab, ca)
+        } else {
+            (ab, bc)
+        };
+        e1 * e2 > 0.0 && area2 / (e1 * e2) >= sin_min
+    };
+    for f in 0..nf.saturating_sub(1) {
+        for s in 0..ns.saturating_sub(1) {
+            let i00 = f * ns + s;
+            let i10 = i00 + 1; // next sample, same frame
+            let i01 = i00 + ns; // same sample, next frame
+            let i11 = i01 + 1;
+            let v = [i00, i10, i01, i11].map(|i| index[i] != u32::MAX);
+            let mut emit = |a: usize, b: usize, c: usize| {
+                if ok(a, b, c) {
+                    mesh.triangles.push([index[a], index[b], index[c]]);
+                }
+            };
+            match v {
+                [true, true, true, true] => {
+                    // Split along the shorter diagonal.
+                    if dist(pts[i00], pts[i11]) <= dist(pts[i10], pts[i01]) {
+                        emit(i00, i10, i11);
+                        emit(i00, i11, i01);
+                    } else {
+                        emit(i00, i10, i01);
+                        emit(i10, i11, i01);
+                    }
+                }
+                [false, true, true, true] => emit(i10, i11, i01),
+                [true, false, true, true] => emit(i00, i11, i01),
+                [true, true, false, true] => emit(i00, i10, i11),
+                [true, true, true, false] => emit(i00, i10, i01),
+                _ => {}
+            }
+        }
+    }
+    // Orient the surface to face up (the scanner looks down on the table).
+    let up: f32 = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+            cross(sub(b, a), sub(c, a))[2]
+        })
+        .sum();
+    if up < 0.0 {
+        for t in &mut mesh.triangles {
+            t.swap(1, 2);
+        }
+    }
+    mesh.smooth(cfg.smooth_iterations, cfg.smooth_lambda);
+    mesh.compute_normals();
+    mesh
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn flat_grid(ns: usize, nf: usize, ds: f32, df: f32) -> Grid {
+        let mut g = Grid::new(ns);
+        for f in 0..nf {
+            let p = Profile {
+                points: (0..ns).map(|s| [s as f32 * ds, f as f32 * df, 0.0]).collect(),
+                intensity: vec![100.0; ns],
+                rgb: None,
+                range: vec![1.0; ns],
+            };
+            g.push(f as i64, &p).unwrap();
+        }
+        g
+    }
+
+    #[test]
+    fn full_grid_gives_two_triangles_per_cell_facing_up() {
+        let g = flat_grid(5, 4, 0.001, 0.002);
+        let m = mesh_grid(&g, &MeshConfig::default());
+        assert_eq!(m.positions.len(), 20);
+        assert_eq!(m.triangles.len(), 2 * 4 * 3);
+        assert!(m.normals.iter().all(|n| (n[2] - 1.0).abs() < 1e-6));
+    }
+
+    #[test]
+    fn long_edges_and_slivers_are_refused() {
+        let g = flat_grid(3, 3, 0.001, 0.02);
+        assert_eq!(mesh_grid(&g, &MeshConfig::default()).triangles.len(), 0, "20 mm edges");
+        // 0.5 mm x 10 mm cells: smallest angle 2.9 degrees.
+        let g = flat_grid(3, 3, 0.0005, 0.010);
+        assert_eq!(mesh_grid(&g, &MeshConfig::default()).triangles.len(), 0);
+        let cfg = MeshConfig { min_angle_deg: 2.0, ..Default::default() };
+        assert_eq!(mesh_grid(&g, &cfg).triangles.len(), 8);
+    }
+
+    #[test]
+    fn single_holes_filled_deliberate_holes_kept() {
+        let mut g = flat_grid(6, 6, 0.001, 0.001);
+        let ns = 6;
+        g.points[2 * ns + 3] = [f32::NAN; 3];
+        for s in 1..4 {
+            g.points[4 * ns + s] = [f32::NAN; 3];
+            g.points[5 * ns + s] = [f32::NAN; 3];
+        }
+        let filled = g.fill_single_holes(0.01);
+        assert_eq!(filled, 1);
+        assert!((g.point(3, 2)[0] - 0.003).abs() < 1e-6);
+        assert!(g.point(2, 4)[0].is_nan());
+    }
+
+    #[test]
+    fn smoothing_keeps_boundary_and_flattens_a_bump() {
+        let mut g = flat_grid(5, 5, 0.001, 0.001);
+        g.points[2 * 5 + 2][2] = 0.001;
+        let mut m = mesh_grid(&g, &MeshConfig::default());
+        let before: Vec<_> = m.positions.clone();
+        m.smooth(5, 0.5);
+        assert!(m.positions[12][2] < 0.0005);
+        assert_eq!(m.positions[0], before[0]);
+        assert_eq!(m.positions[4], before[4]);
+    }
+
+    #[test]
+    fn mismatched_profile_length_is_refused() {
+        let mut g = flat_grid(4, 1, 0.001, 0.001);
+        let p = Profile { points: vec![[0.0; 3]; 3], intensity: vec![0.0; 3], rgb: None, range: vec![0.0; 3] };
+        assert_eq!(g.push(1, &p), Err(3));
+    }
+}

@@ -1,0 +1,129 @@
+//! The scanner rig: cameras on the C-arm and the laser fan beam, as stored in a rig file.
+//!
+//! The rig file (YAML) is this struct serialised; see `launch-config/rig_study.yaml` for a
+//! documented example. Rotations are quaternions `[x, y, z, w]` of `carm -> <cam>_optical_frame`.
+
+use crate::camera::{CameraError, CameraModel, Distortion};
+use crate::geom::{Iso3, Quat, Vec3};
+use crate::triangulate::CameraGeometry;
+use serde::{Deserialize, Serialize};
+
+/// One camera of the rig.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RigCamera {
+    /// Camera name: its namespace (`cam1`) and frame prefix (`cam1_optical_frame`).
+    pub name: String,
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// Focal length x, pixels.
+    pub fx: f64,
+    /// Focal length y, pixels.
+    pub fy: f64,
+    /// Principal point x, pixels.
+    pub cx: f64,
+    /// Principal point y, pixels.
+    pub cy: f64,
+    /// `plumb_bob` or `rational_polynomial`.
+    pub distortion_model: String,
+    /// Distortion coefficients in ROS order.
+    pub d: Vec<f64>,
+    /// Optical centre in `carm`, metres.
+    pub translation: [f64; 3],
+    /// Rotation `carm -> optical` as a quaternion `[x, y, z, w]`.
+    pub rotation: [f64; 4],
+}
+
+impl RigCamera {
+    /// The intrinsics.
+    pub fn model(&self) -> Result<CameraModel, CameraError> {
+        let m = CameraModel {
+            width: self.width,
+            height: self.height,
+            fx: self.fx,
+            fy: self.fy,
+            cx: self.cx,
+            cy: self.cy,
+            distortion: Distortion::from_ros(&self.distortion_model, &self.d)?,
+        };
+        m.validate()?;
+        Ok(m)
+    }
+    /// `carm -> optical` as a transform.
+    pub fn carm_from_optical(&self) -> Iso3 {
+        let [x, y, z, w] = self.rotation;
+        Iso3::from_parts(Vec3::from_array(self.translation), Quat { x, y, z, w })
+    }
+    /// Intrinsics and extrinsics together.
+    pub fn geometry(&self) -> Result<CameraGeometry, CameraError> {
+        Ok(CameraGeometry { model: self.model()?, carm_from_optical: self.carm_from_optical() })
+    }
+    /// A camera from a model and a pose.
+    pub fn from_parts(name: &str, model: &CameraModel, carm_from_optical: &Iso3) -> RigCamera {
+        let (dm, d) = model.distortion.to_ros();
+        let q = carm_from_optical.quaternion();
+        RigCamera {
+            name: name.to_string(),
+            width: model.width,
+            height: model.height,
+            fx: model.fx,
+            fy: model.fy,
+            cx: model.cx,
+            cy: model.cy,
+            distortion_model: dm.to_string(),
+            d,
+            translation: carm_from_optical.translation.to_array(),
+            rotation: [q.x, q.y, q.z, q.w],
+        }
+    }
+}
+
+/// Cameras and laser of one scanner.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Rig {
+    /// The laser plane in `carm`, `[nx, ny, nz, d]`.
+    pub laser_plane: [f64; 4],
+    /// The laser (and X-ray) source in `carm`, metres.
+    pub laser_source: [f64; 3],
+    /// The cameras.
+    pub cameras: Vec<RigCamera>,
+}
+
+impl Rig {
+    /// The study's two-camera arrangement (thesis section 6.1: cameras 30 degrees from the
+    /// vertical, on opposite sides of the fan beam), at the given image size. `cam1` sits behind
+    /// the beam on the -X side, `cam2` ahead of it on the +X side, both 0.8 m above the tabletop;
+    /// image rows run across the table, so the line is vertical in the image.
+    pub fn study(width: u32, height: u32) -> Rig {
+        let base = CameraModel {
+            width: 640,
+            height: 480,
+            fx: 700.0,
+            fy: 700.0,
+            cx: 322.4,
+            cy: 237.6,
+            distortion: Distortion::PlumbBob { k1: -0.12, k2: 0.05, p1: 0.0005, p2: -0.0003, k3: 0.0 },
+        };
+        let model = base.scaled(width, height);
+        let target = Vec3::new(0.0, 0.0, 0.05);
+        let cam = |name: &str, eye: Vec3, down: Vec3| {
+            // look_at only fails for coincident points or a parallel hint; these are fixed.
+            let pose = Iso3::look_at(eye, target, down).unwrap_or(Iso3::IDENTITY);
+            RigCamera::from_parts(name, &model, &pose)
+        };
+        Rig {
+            laser_plane: [0.0, 1.0, 0.0, 0.0],
+            laser_source: [0.0, 0.0, 1.2],
+            cameras: vec![
+                cam("cam1", Vec3::new(-0.25, -0.40, 0.80), Vec3::X),
+                cam("cam2", Vec3::new(0.25, 0.40, 0.80), -Vec3::X),
+            ],
+        }
+    }
+
+    /// The camera of that name.
+    pub fn camera(&self, name: &str) -> Option<&RigCamera> {
+        self.cameras.iter().find(|c| c.name == name)
+    }
+}
