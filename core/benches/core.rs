@@ -19,13 +19,18 @@ fn scanner(w: u32, h: u32, encoding: Encoding) -> Scanner {
     Scanner::new(Scene::by_name("pyramid").unwrap(), Rig::study(w, h), LaserModel::default(), settings).unwrap()
 }
 
+/// Sum of all bytes, in blocks small enough for 16-bit lanes: vectorises to the read bound.
+fn byte_sum(data: &[u8]) -> u64 {
+    data.chunks(128).map(|c| u64::from(c.iter().map(|&v| u16::from(v)).sum::<u16>())).sum()
+}
+
 fn edge_detection(c: &mut Criterion) {
     for (w, h) in [(320u32, 240u32), (640, 480), (1920, 1200)] {
         let mut g = c.benchmark_group(format!("edge_{w}x{h}"));
         g.throughput(Throughput::Elements(u64::from(w) * u64::from(h)));
         let s = scanner(w, h, Encoding::Mono8);
         let img = s.render(0, s.frame_count() / 2);
-        g.bench_function("byte_sum", |b| b.iter(|| black_box(&img.data).iter().map(|&v| u64::from(v)).sum::<u64>()));
+        g.bench_function("byte_sum", |b| b.iter(|| byte_sum(black_box(&img.data))));
         for m in [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic, Method::Gradient] {
             let mut d = EdgeDetector::new(EdgeConfig { method: m, ..Default::default() }).unwrap();
             let mut out = LaserLine::default();

@@ -298,21 +298,10 @@ struct Peak {
     saturated: bool,
 }
 
-/// Index of the first maximum of a byte row, in one vectorisable pass over 32-byte blocks.
+/// Index of the first maximum of a byte row: a vectorised max, then a SIMD byte search.
 fn argmax_u8(p: &[u8]) -> Option<usize> {
-    const BLOCK: usize = 32;
-    let mut best = 0u8;
-    let mut best_block = None;
-    for (i, chunk) in p.chunks(BLOCK).enumerate() {
-        let m = chunk.iter().fold(0u8, |a, &b| a.max(b));
-        if best_block.is_none() || m > best {
-            best = m;
-            best_block = Some(i);
-        }
-    }
-    let b = best_block?;
-    let start = b * BLOCK;
-    p[start..(start + BLOCK).min(p.len())].iter().position(|&v| v == best).map(|i| start + i)
+    let max = p.iter().fold(0u8, |a, &b| a.max(b));
+    memchr::memchr(max, p)
 }
 
 fn argmax_f32(p: &[f32]) -> Option<usize> {
@@ -325,31 +314,36 @@ fn argmax_f32(p: &[f32]) -> Option<usize> {
     best.map(|(i, _)| i)
 }
 
-/// Mean and variance of a run of samples.
-fn mean_var<S: Sample>(s: &[S]) -> Option<(f32, f32, usize)> {
-    if s.is_empty() {
-        return None;
+/// Sum, sum of squares and count of a run of samples (one pass).
+fn moments<S: Sample>(s: &[S]) -> (f32, f32, usize) {
+    let (mut a, mut b) = (0.0f32, 0.0f32);
+    for v in s {
+        let x = v.f();
+        a += x;
+        b += x * x;
     }
-    let n = s.len() as f32;
-    let mean = s.iter().map(|v| v.f()).sum::<f32>() / n;
-    let var = s.iter().map(|v| (v.f() - mean).powi(2)).sum::<f32>() / n;
-    Some((mean, var, s.len()))
+    (a, b, s.len())
 }
 
-/// Background level and noise around a peak at `m`, from flanks outside `±gap`.
+/// Background level and noise around a peak at `m`, from flanks outside `±gap`: the pooled mean,
+/// and the standard deviation of each flank about its own mean (so a shading slope between the
+/// two flanks is not counted as noise).
 fn background<S: Sample>(p: &[S], m: usize, gap: usize, flank: usize) -> (f32, f32) {
-    let left = m.checked_sub(gap + 1).map(|end| &p[end.saturating_sub(flank - 1)..=end]);
-    let right = (m + gap + 1 < p.len()).then(|| &p[m + gap + 1..(m + gap + 1 + flank).min(p.len())]);
-    let l = left.and_then(mean_var);
-    let r = right.and_then(mean_var);
-    match (l, r) {
-        (Some((ml, vl, nl)), Some((mr, vr, nr))) => {
-            let n = (nl + nr) as f32;
-            ((ml * nl as f32 + mr * nr as f32) / n, ((vl * nl as f32 + vr * nr as f32) / n).sqrt())
+    let left = m.checked_sub(gap + 1).map(|end| moments(&p[end.saturating_sub(flank - 1)..=end]));
+    let right = (m + gap + 1 < p.len()).then(|| moments(&p[m + gap + 1..(m + gap + 1 + flank).min(p.len())]));
+    let (mut sum, mut n, mut ss) = (0.0f32, 0usize, 0.0f32);
+    for (a, b, k) in [left, right].into_iter().flatten() {
+        if k == 0 {
+            continue;
         }
-        (Some((m, v, _)), None) | (None, Some((m, v, _))) => (m, v.sqrt()),
-        (None, None) => (0.0, 0.0),
+        sum += a;
+        n += k;
+        ss += b - a * a / k as f32;
     }
+    if n == 0 {
+        return (0.0, 0.0);
+    }
+    (sum / n as f32, (ss.max(0.0) / n as f32).sqrt())
 }
 
 /// Linear-interpolated position where the profile crosses `level` between `i` (below) and `j`.
@@ -375,7 +369,8 @@ fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturat
     let max_hw = cfg.max_half_width_px as usize;
     // First pass: the run above half of the peak over the row minimum nearby gives the gap
     // that keeps the background flanks off the line.
-    let (bg0, _) = background(p, m, max_hw.min(4), cfg.flank_px as usize);
+    let gap0 = max_hw.min(4);
+    let (bg0, noise0) = background(p, m, gap0, cfg.flank_px as usize);
     let half0 = bg0 + 0.5 * (peak - bg0);
     let mut lo = m;
     while lo > 0 && m - lo < max_hw && p[lo - 1].f() > half0 {
@@ -386,7 +381,7 @@ fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturat
         hi += 1;
     }
     let gap = (2 * (m - lo).max(hi - m) + 2).min(max_hw);
-    let (bg, noise) = background(p, m, gap, cfg.flank_px as usize);
+    let (bg, noise) = if gap == gap0 { (bg0, noise0) } else { background(p, m, gap, cfg.flank_px as usize) };
     let strength = peak - bg;
     if strength < (cfg.min_strength * scale).max(cfg.noise_factor * noise) || strength <= 0.0 {
         return None;
@@ -618,14 +613,13 @@ fn fill_profile(
 ) {
     buf.clear();
     let enc = image.encoding();
-    let value = |x: u32, y: u32| -> f32 {
-        let row = image.row(y);
-        let x = x as usize;
+    let big_endian = image.is_big_endian();
+    let pixel = |row: &[u8], x: usize| -> f32 {
         match enc {
             Encoding::Mono8 => f32::from(row[x]),
             Encoding::Mono16 => {
                 let b = [row[2 * x], row[2 * x + 1]];
-                f32::from(if image.is_big_endian() { u16::from_be_bytes(b) } else { u16::from_le_bytes(b) })
+                f32::from(if big_endian { u16::from_be_bytes(b) } else { u16::from_le_bytes(b) })
             }
             Encoding::Rgb8 | Encoding::Bgr8 => {
                 let px = &row[3 * x..3 * x + 3];
@@ -640,9 +634,10 @@ fn fill_profile(
         }
     };
     if vertical {
-        buf.extend(inner.map(|x| value(x, s)));
+        let row = image.row(s);
+        buf.extend(inner.map(|x| pixel(row, x as usize)));
     } else {
-        buf.extend(inner.map(|y| value(s, y)));
+        buf.extend(inner.map(|y| pixel(image.row(y), s as usize)));
     }
 }
 
