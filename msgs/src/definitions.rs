@@ -3,39 +3,77 @@
 
 /// (type name, .msg text, direct dependencies).
 pub(crate) const DEFINITIONS: &[(&str, &str, &[&str])] = &[
-    ("builtin_interfaces/msg/Time", r#"int32 sec
+    (
+        "builtin_interfaces/msg/Time",
+        r#"int32 sec
 uint32 nanosec
-"#, &[]),
-    ("builtin_interfaces/msg/Duration", r#"int32 sec
+"#,
+        &[],
+    ),
+    (
+        "builtin_interfaces/msg/Duration",
+        r#"int32 sec
 uint32 nanosec
-"#, &[]),
-    ("std_msgs/msg/Header", r#"builtin_interfaces/Time stamp
+"#,
+        &[],
+    ),
+    (
+        "std_msgs/msg/Header",
+        r#"builtin_interfaces/Time stamp
 string frame_id
-"#, &["builtin_interfaces/msg/Time"]),
-    ("std_msgs/msg/ColorRGBA", r#"float32 r
+"#,
+        &["builtin_interfaces/msg/Time"],
+    ),
+    (
+        "std_msgs/msg/ColorRGBA",
+        r#"float32 r
 float32 g
 float32 b
 float32 a
-"#, &[]),
-    ("std_msgs/msg/String", r#"string data
-"#, &[]),
-    ("std_msgs/msg/Float64", r#"float64 data
-"#, &[]),
-    ("rosgraph_msgs/msg/Clock", r#"builtin_interfaces/Time clock
-"#, &["builtin_interfaces/msg/Time"]),
-    ("sensor_msgs/msg/Image", r#"std_msgs/Header header
+"#,
+        &[],
+    ),
+    (
+        "std_msgs/msg/String",
+        r#"string data
+"#,
+        &[],
+    ),
+    (
+        "std_msgs/msg/Float64",
+        r#"float64 data
+"#,
+        &[],
+    ),
+    (
+        "rosgraph_msgs/msg/Clock",
+        r#"builtin_interfaces/Time clock
+"#,
+        &["builtin_interfaces/msg/Time"],
+    ),
+    (
+        "sensor_msgs/msg/Image",
+        r#"std_msgs/Header header
 uint32 height
 uint32 width
 string encoding
 uint8 is_bigendian
 uint32 step
 uint8[] data
-"#, &["std_msgs/msg/Header"]),
-    ("sensor_msgs/msg/CompressedImage", r#"std_msgs/Header header
+"#,
+        &["std_msgs/msg/Header"],
+    ),
+    (
+        "sensor_msgs/msg/CompressedImage",
+        r#"std_msgs/Header header
 string format
 uint8[] data
-"#, &["std_msgs/msg/Header"]),
-    ("sensor_msgs/msg/CameraInfo", r#"std_msgs/Header header
+"#,
+        &["std_msgs/msg/Header"],
+    ),
+    (
+        "sensor_msgs/msg/CameraInfo",
+        r#"std_msgs/Header header
 uint32 height
 uint32 width
 string distortion_model
@@ -46,14 +84,22 @@ float64[12] p
 uint32 binning_x
 uint32 binning_y
 sensor_msgs/RegionOfInterest roi
-"#, &["std_msgs/msg/Header", "sensor_msgs/msg/RegionOfInterest"]),
-    ("sensor_msgs/msg/RegionOfInterest", r#"uint32 x_offset
+"#,
+        &["std_msgs/msg/Header", "sensor_msgs/msg/RegionOfInterest"],
+    ),
+    (
+        "sensor_msgs/msg/RegionOfInterest",
+        r#"uint32 x_offset
 uint32 y_offset
 uint32 height
 uint32 width
 bool do_rectify
-"#, &[]),
-    ("sensor_msgs/msg/PointCloud2", r#"std_msgs/Header header
+"#,
+        &[],
+    ),
+    (
+        "sensor_msgs/msg/PointCloud2",
+        r#"std_msgs/Header header
 uint32 height
 uint32 width
 sensor_msgs/PointField[] fields
@@ -62,8 +108,12 @@ uint32 point_step
 uint32 row_step
 uint8[] data
 bool is_dense
-"#, &["std_msgs/msg/Header", "sensor_msgs/msg/PointField"]),
-    ("sensor_msgs/msg/PointField", r#"uint8 INT8=1
+"#,
+        &["std_msgs/msg/Header", "sensor_msgs/msg/PointField"],
+    ),
+    (
+        "sensor_msgs/msg/PointField",
+        r#"uint8 INT8=1
 uint8 UINT8=2
 uint8 INT16=3
 uint8 UINT16=4
@@ -75,44 +125,88 @@ string name
 uint32 offset
 uint8 datatype
 uint32 count
-"#, &[]),
-    ("sensor_msgs/msg/JointState", r#"std_msgs/Header header
+"#,
+        &[],
+    ),
+    (
+        "sensor_msgs/msg/JointState",
+        r#"std_msgs/Header header
 string[] name
 float64[] position
 float64[] velocity
 float64[] effort
-"#, &["std_msgs/msg/Header"]),
-    ("geometry_msgs/msg/Vector3", r#"float64 x
+"#,
+        &["std_msgs/msg/Header"],
+    ),
+    (
+        "geometry_msgs/msg/Vector3",
+        r#"float64 x
 float64 y
 float64 z
-"#, &[]),
-    ("geometry_msgs/msg/Quaternion", r#"float64 x
+"#,
+        &[],
+    ),
+    (
+        "geometry_msgs/msg/Quaternion",
+        r#"float64 x
 float64 y
 float64 z
 float64 w
-"#, &[]),
-    ("geometry_msgs/msg/Point", r#"float64 x
+"#,
+        &[],
+    ),
+    (
+        "geometry_msgs/msg/Point",
+        r#"float64 x
 float64 y
 float64 z
-"#, &[]),
-    ("geometry_msgs/msg/Pose", r#"geometry_msgs/Point position
+"#,
+        &[],
+    ),
+    (
+        "geometry_msgs/msg/Pose",
+        r#"geometry_msgs/Point position
 geometry_msgs/Quaternion orientation
-"#, &["geometry_msgs/msg/Point", "geometry_msgs/msg/Quaternion"]),
-    ("geometry_msgs/msg/Transform", r#"geometry_msgs/Vector3 translation
+"#,
+        &["geometry_msgs/msg/Point", "geometry_msgs/msg/Quaternion"],
+    ),
+    (
+        "geometry_msgs/msg/Transform",
+        r#"geometry_msgs/Vector3 translation
 geometry_msgs/Quaternion rotation
-"#, &["geometry_msgs/msg/Vector3", "geometry_msgs/msg/Quaternion"]),
-    ("geometry_msgs/msg/TransformStamped", r#"std_msgs/Header header
+"#,
+        &["geometry_msgs/msg/Vector3", "geometry_msgs/msg/Quaternion"],
+    ),
+    (
+        "geometry_msgs/msg/TransformStamped",
+        r#"std_msgs/Header header
 string child_frame_id
 geometry_msgs/Transform transform
-"#, &["std_msgs/msg/Header", "geometry_msgs/msg/Transform"]),
-    ("tf2_msgs/msg/TFMessage", r#"geometry_msgs/TransformStamped[] transforms
-"#, &["geometry_msgs/msg/TransformStamped"]),
-    ("shape_msgs/msg/Mesh", r#"shape_msgs/MeshTriangle[] triangles
+"#,
+        &["std_msgs/msg/Header", "geometry_msgs/msg/Transform"],
+    ),
+    (
+        "tf2_msgs/msg/TFMessage",
+        r#"geometry_msgs/TransformStamped[] transforms
+"#,
+        &["geometry_msgs/msg/TransformStamped"],
+    ),
+    (
+        "shape_msgs/msg/Mesh",
+        r#"shape_msgs/MeshTriangle[] triangles
 geometry_msgs/Point[] vertices
-"#, &["shape_msgs/msg/MeshTriangle", "geometry_msgs/msg/Point"]),
-    ("shape_msgs/msg/MeshTriangle", r#"uint32[3] vertex_indices
-"#, &[]),
-    ("visualization_msgs/msg/Marker", r#"int32 ARROW=0
+"#,
+        &["shape_msgs/msg/MeshTriangle", "geometry_msgs/msg/Point"],
+    ),
+    (
+        "shape_msgs/msg/MeshTriangle",
+        r#"uint32[3] vertex_indices
+"#,
+        &[],
+    ),
+    (
+        "visualization_msgs/msg/Marker",
+        r#"int32 ARROW=0
 int32 CUBE=1
 int32 SPHERE=2
 int32 CYLINDER=3
@@ -148,16 +242,42 @@ string text
 string mesh_resource
 visualization_msgs/MeshFile mesh_file
 bool mesh_use_embedded_materials
-"#, &["std_msgs/msg/Header", "geometry_msgs/msg/Pose", "geometry_msgs/msg/Vector3", "std_msgs/msg/ColorRGBA", "builtin_interfaces/msg/Duration", "geometry_msgs/msg/Point", "sensor_msgs/msg/CompressedImage", "visualization_msgs/msg/UVCoordinate", "visualization_msgs/msg/MeshFile"]),
-    ("visualization_msgs/msg/MarkerArray", r#"visualization_msgs/Marker[] markers
-"#, &["visualization_msgs/msg/Marker"]),
-    ("visualization_msgs/msg/UVCoordinate", r#"float32 u
+"#,
+        &[
+            "std_msgs/msg/Header",
+            "geometry_msgs/msg/Pose",
+            "geometry_msgs/msg/Vector3",
+            "std_msgs/msg/ColorRGBA",
+            "builtin_interfaces/msg/Duration",
+            "geometry_msgs/msg/Point",
+            "sensor_msgs/msg/CompressedImage",
+            "visualization_msgs/msg/UVCoordinate",
+            "visualization_msgs/msg/MeshFile",
+        ],
+    ),
+    (
+        "visualization_msgs/msg/MarkerArray",
+        r#"visualization_msgs/Marker[] markers
+"#,
+        &["visualization_msgs/msg/Marker"],
+    ),
+    (
+        "visualization_msgs/msg/UVCoordinate",
+        r#"float32 u
 float32 v
-"#, &[]),
-    ("visualization_msgs/msg/MeshFile", r#"string filename
+"#,
+        &[],
+    ),
+    (
+        "visualization_msgs/msg/MeshFile",
+        r#"string filename
 uint8[] data
-"#, &[]),
-    ("rcl_interfaces/msg/Log", r#"uint8 DEBUG=10
+"#,
+        &[],
+    ),
+    (
+        "rcl_interfaces/msg/Log",
+        r#"uint8 DEBUG=10
 uint8 INFO=20
 uint8 WARN=30
 uint8 ERROR=40
@@ -169,8 +289,12 @@ string msg
 string file
 string function
 uint32 line
-"#, &["builtin_interfaces/msg/Time"]),
-    ("xsurf_msgs/msg/LaserLine", r#"# The laser line found in one camera image.
+"#,
+        &["builtin_interfaces/msg/Time"],
+    ),
+    (
+        "xsurf_msgs/msg/LaserLine",
+        r#"# The laser line found in one camera image.
 std_msgs/Header header          # stamp and frame_id of the source image
 uint32 image_width
 uint32 image_height
@@ -182,13 +306,19 @@ float32[] v                     # sub-pixel row of the line centre, NaN where no
 float32[] strength              # peak height above the local background (grey levels), 0 where none
 float32[] width                 # line width (pixels, full width at half maximum), 0 where none
 uint8[] rgb                     # surface colour beside the line, 3 bytes a sample; empty for mono images
-"#, &["std_msgs/msg/Header"]),
-    ("xsurf_msgs/msg/ScanEvent", r#"# START / END / ABORT of a scan. Every node follows these, whoever publishes them.
+"#,
+        &["std_msgs/msg/Header"],
+    ),
+    (
+        "xsurf_msgs/msg/ScanEvent",
+        r#"# START / END / ABORT of a scan. Every node follows these, whoever publishes them.
 std_msgs/Header header
 uint32 scan_id
 uint8 START=0
 uint8 END=1
 uint8 ABORT=2
 uint8 event
-"#, &["std_msgs/msg/Header"]),
+"#,
+        &["std_msgs/msg/Header"],
+    ),
 ];
