@@ -1,0 +1,652 @@
+//! rosbag2 bags with MCAP storage: a directory with `metadata.yaml` (we write version 8, which
+//! Humble and Jazzy both read; we read versions 5 to 9) and `<name>_0.mcap` (profile `ros2`,
+//! `ros2msg` schemas, `cdr` messages, optional zstd chunk compression).
+
+use crate::FileError;
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write as _;
+use std::io::{BufReader, Read};
+use std::path::{Path, PathBuf};
+
+/// Why a bag cannot be written or read.
+#[derive(Debug, thiserror::Error)]
+pub enum BagError {
+    /// A file could not be read or written.
+    #[error(transparent)]
+    File(#[from] FileError),
+    /// The output directory exists and is not empty.
+    #[error("{0}: bag directory exists and is not empty")]
+    Exists(PathBuf),
+    /// `metadata.yaml` is missing or malformed.
+    #[error("{path}: {reason}")]
+    Metadata {
+        /// The metadata file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The MCAP data is malformed or ends early.
+    #[error("{path}: MCAP error at byte offset {offset}: {reason}")]
+    Mcap {
+        /// The MCAP file.
+        path: PathBuf,
+        /// Bytes read when the error was found.
+        offset: u64,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A message names a topic that was not added.
+    #[error("topic {0} was not added to the bag")]
+    UnknownTopic(String),
+    /// The bag uses something we do not read.
+    #[error("{path}: {reason}")]
+    Unsupported {
+        /// The bag or file.
+        path: PathBuf,
+        /// What is not supported.
+        reason: String,
+    },
+}
+
+/// The QoS a topic was offered with, as rosbag2 records it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Qos {
+    /// Reliable (else best effort).
+    pub reliable: bool,
+    /// Transient local (else volatile).
+    pub transient_local: bool,
+    /// History depth (keep last).
+    pub depth: u32,
+}
+
+impl Qos {
+    /// Reliable, volatile, depth 10: clouds, meshes, events, tf.
+    pub const RELIABLE: Qos = Qos { reliable: true, transient_local: false, depth: 10 };
+    /// Best effort, volatile, depth 5: camera streams.
+    pub const SENSOR: Qos = Qos { reliable: false, transient_local: false, depth: 5 };
+    /// Reliable, transient local, depth 1: `/tf_static`.
+    pub const STATIC: Qos = Qos { reliable: true, transient_local: true, depth: 1 };
+
+    /// The `offered_qos_profiles` string of metadata version 8 (integer enums), also used as
+    /// the MCAP channel's metadata so the two agree.
+    pub fn to_yaml_string(&self) -> String {
+        format!(
+            "- history: 1\n  depth: {}\n  reliability: {}\n  durability: {}\n  deadline:\n    sec: 9223372036\n    nsec: 854775807\n  lifespan:\n    sec: 9223372036\n    nsec: 854775807\n  liveliness: 1\n  liveliness_lease_duration:\n    sec: 9223372036\n    nsec: 854775807\n  avoid_ros_namespace_conventions: false",
+            self.depth,
+            if self.reliable { 1 } else { 2 },
+            if self.transient_local { 1 } else { 2 }
+        )
+    }
+
+    /// Parses the first profile of an `offered_qos_profiles` value: the version 4-8 string form
+    /// (integer enums) or the version 9 list form (string enums). Unknown fields keep defaults.
+    pub fn from_metadata(v: &serde_yaml::Value) -> Option<Qos> {
+        let parsed;
+        let list = match v {
+            serde_yaml::Value::String(s) if s.trim().is_empty() => return None,
+            serde_yaml::Value::String(s) => {
+                parsed = serde_yaml::from_str::<serde_yaml::Value>(s).ok()?;
+                &parsed
+            }
+            other => other,
+        };
+        let p = list.as_sequence()?.first()?;
+        let field = |k: &str| p.get(k);
+        let reliable = match field("reliability") {
+            Some(serde_yaml::Value::Number(n)) => n.as_u64() != Some(2),
+            Some(serde_yaml::Value::String(s)) => s != "best_effort",
+            _ => true,
+        };
+        let transient_local = match field("durability") {
+            Some(serde_yaml::Value::Number(n)) => n.as_u64() == Some(1),
+            Some(serde_yaml::Value::String(s)) => s == "transient_local",
+            _ => false,
+        };
+        let depth = field("depth").and_then(serde_yaml::Value::as_u64).unwrap_or(10) as u32;
+        Some(Qos { reliable, transient_local, depth })
+    }
+}
+
+/// Options of a new bag.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct BagOptions {
+    /// Compress MCAP chunks with zstd.
+    pub zstd: bool,
+}
+
+struct TopicRecord {
+    name: String,
+    type_name: String,
+    qos: String,
+    channel: u16,
+    count: u64,
+}
+
+/// Writes a rosbag2 directory.
+pub struct BagWriter {
+    dir: PathBuf,
+    file_name: String,
+    mcap: mcap::Writer<std::io::BufWriter<std::fs::File>>,
+    topics: Vec<TopicRecord>,
+    by_name: HashMap<String, usize>,
+    schemas: HashMap<String, u16>,
+    start_ns: Option<u64>,
+    end_ns: u64,
+    count: u64,
+}
+
+fn mcap_err(path: &Path, offset: u64, e: impl std::fmt::Display) -> BagError {
+    BagError::Mcap { path: path.to_path_buf(), offset, reason: e.to_string() }
+}
+
+impl BagWriter {
+    /// Creates the bag directory (which must not exist or be empty) and its MCAP file.
+    pub fn create(dir: &Path, options: BagOptions) -> Result<Self, BagError> {
+        if dir.exists() {
+            let empty = std::fs::read_dir(dir).map_err(|e| FileError::new(dir, e))?.next().is_none();
+            if !empty {
+                return Err(BagError::Exists(dir.to_path_buf()));
+            }
+        }
+        std::fs::create_dir_all(dir).map_err(|e| FileError::new(dir, e))?;
+        let stem = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "bag".into());
+        let file_name = format!("{stem}_0.mcap");
+        let path = dir.join(&file_name);
+        let file = std::fs::File::create(&path).map_err(|e| FileError::new(&path, e))?;
+        let opts = mcap::WriteOptions::new()
+            .profile("ros2")
+            .library("xsurf")
+            .compression(options.zstd.then_some(mcap::Compression::Zstd));
+        let mcap = opts.create(std::io::BufWriter::new(file)).map_err(|e| mcap_err(&path, 0, e))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            file_name,
+            mcap,
+            topics: Vec::new(),
+            by_name: HashMap::new(),
+            schemas: HashMap::new(),
+            start_ns: None,
+            end_ns: 0,
+            count: 0,
+        })
+    }
+
+    /// Adds a topic (once; adding it again is a no-op).
+    pub fn add_topic(&mut self, name: &str, type_name: &str, definition: &str, qos: &Qos) -> Result<(), BagError> {
+        if self.by_name.contains_key(name) {
+            return Ok(());
+        }
+        let path = self.dir.join(&self.file_name);
+        let schema = match self.schemas.get(type_name) {
+            Some(&id) => id,
+            None => {
+                let id = self
+                    .mcap
+                    .add_schema(type_name, "ros2msg", definition.as_bytes())
+                    .map_err(|e| mcap_err(&path, 0, e))?;
+                self.schemas.insert(type_name.to_string(), id);
+                id
+            }
+        };
+        let qos = qos.to_yaml_string();
+        let mut meta = BTreeMap::new();
+        meta.insert("offered_qos_profiles".to_string(), qos.clone());
+        let channel = self.mcap.add_channel(schema, name, "cdr", &meta).map_err(|e| mcap_err(&path, 0, e))?;
+        self.by_name.insert(name.to_string(), self.topics.len());
+        self.topics.push(TopicRecord { name: name.into(), type_name: type_name.into(), qos, channel, count: 0 });
+        Ok(())
+    }
+
+    /// Writes one CDR message (with its 4-byte header) on a topic added before.
+    pub fn write(&mut self, topic: &str, log_time_ns: u64, publish_time_ns: u64, data: &[u8]) -> Result<(), BagError> {
+        let &i = self.by_name.get(topic).ok_or_else(|| BagError::UnknownTopic(topic.to_string()))?;
+        let t = &mut self.topics[i];
+        let header = mcap::records::MessageHeader {
+            channel_id: t.channel,
+            sequence: 0,
+            log_time: log_time_ns,
+            publish_time: publish_time_ns,
+        };
+        self.mcap.write_to_known_channel(&header, data).map_err(|e| mcap_err(&self.dir.join(&self.file_name), 0, e))?;
+        t.count += 1;
+        self.count += 1;
+        self.start_ns = Some(self.start_ns.map_or(log_time_ns, |s| s.min(log_time_ns)));
+        self.end_ns = self.end_ns.max(log_time_ns);
+        Ok(())
+    }
+
+    /// Finishes the MCAP file and writes `metadata.yaml` (atomically). Returns the metadata.
+    pub fn finish(mut self) -> Result<BagMetadata, BagError> {
+        let path = self.dir.join(&self.file_name);
+        self.mcap.finish().map_err(|e| mcap_err(&path, 0, e))?;
+        let start = self.start_ns.unwrap_or(0);
+        let meta = BagMetadata {
+            version: 8,
+            storage_identifier: "mcap".into(),
+            start_ns: start,
+            // rosbags only returns messages inside [start, start + duration]: make it inclusive.
+            duration_ns: if self.count > 0 { self.end_ns - start + 1 } else { 0 },
+            message_count: self.count,
+            topics: self
+                .topics
+                .iter()
+                .map(|t| TopicMetadata {
+                    name: t.name.clone(),
+                    type_name: t.type_name.clone(),
+                    serialization_format: "cdr".into(),
+                    qos: Qos::from_metadata(&serde_yaml::Value::String(t.qos.clone())),
+                    qos_text: t.qos.clone(),
+                    message_count: t.count,
+                })
+                .collect(),
+            files: vec![self.file_name.clone()],
+            // rosbag2 records MCAP chunk compression only in the storage preset, not here.
+            compression: String::new(),
+            ros_distro: "jazzy".into(),
+        };
+        crate::write_bytes_atomic(&self.dir.join("metadata.yaml"), meta.to_yaml().as_bytes())?;
+        Ok(meta)
+    }
+}
+
+/// One topic of a bag.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicMetadata {
+    /// Topic name.
+    pub name: String,
+    /// ROS 2 type, `pkg/msg/Type`.
+    pub type_name: String,
+    /// `cdr`.
+    pub serialization_format: String,
+    /// The first offered QoS profile, when recorded.
+    pub qos: Option<Qos>,
+    /// The QoS as stored (version 8 string form).
+    pub qos_text: String,
+    /// Messages on the topic.
+    pub message_count: u64,
+}
+
+/// The contents of `metadata.yaml`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BagMetadata {
+    /// Metadata version (5..=9 read, 8 written).
+    pub version: u64,
+    /// `mcap`.
+    pub storage_identifier: String,
+    /// First message, ns since the epoch.
+    pub start_ns: u64,
+    /// Duration, ns.
+    pub duration_ns: u64,
+    /// Total messages.
+    pub message_count: u64,
+    /// Topics.
+    pub topics: Vec<TopicMetadata>,
+    /// Storage files, relative to the bag directory.
+    pub files: Vec<String>,
+    /// How the data is compressed, for display.
+    pub compression: String,
+    /// ROS distribution that wrote the bag.
+    pub ros_distro: String,
+}
+
+fn yaml_str(s: &str) -> String {
+    serde_json::to_string(s).unwrap_or_else(|_| "\"\"".into())
+}
+
+impl BagMetadata {
+    /// Renders version 8 `metadata.yaml`.
+    pub fn to_yaml(&self) -> String {
+        let mut y = String::new();
+        let _ = writeln!(y, "rosbag2_bagfile_information:\n  version: 8\n  storage_identifier: mcap");
+        let _ = writeln!(y, "  duration:\n    nanoseconds: {}", self.duration_ns);
+        let _ = writeln!(y, "  starting_time:\n    nanoseconds_since_epoch: {}", self.start_ns);
+        let _ = writeln!(y, "  message_count: {}\n  topics_with_message_count:", self.message_count);
+        for t in &self.topics {
+            let _ = writeln!(
+                y,
+                "    - topic_metadata:\n        name: {}\n        type: {}\n        serialization_format: cdr\n        offered_qos_profiles: {}\n        type_description_hash: \"\"\n      message_count: {}",
+                yaml_str(&t.name),
+                yaml_str(&t.type_name),
+                yaml_str(&t.qos_text),
+                t.message_count
+            );
+        }
+        let _ = writeln!(y, "  compression_format: \"\"\n  compression_mode: \"\"\n  relative_file_paths:");
+        for f in &self.files {
+            let _ = writeln!(y, "    - {}", yaml_str(f));
+        }
+        let _ = writeln!(y, "  files:");
+        for f in &self.files {
+            let _ = writeln!(
+                y,
+                "    - path: {}\n      starting_time:\n        nanoseconds_since_epoch: {}\n      duration:\n        nanoseconds: {}\n      message_count: {}",
+                yaml_str(f),
+                self.start_ns,
+                self.duration_ns,
+                self.message_count
+            );
+        }
+        let _ = writeln!(y, "  custom_data: ~\n  ros_distro: {}", yaml_str(&self.ros_distro));
+        y
+    }
+
+    /// Parses `metadata.yaml` text (versions 5 to 9). `path` names the file in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<BagMetadata, BagError> {
+        let err = |reason: String| BagError::Metadata { path: path.to_path_buf(), reason };
+        let root: serde_yaml::Value = serde_yaml::from_str(text).map_err(|e| err(format!("not YAML: {e}")))?;
+        let info =
+            root.get("rosbag2_bagfile_information").ok_or_else(|| err("no rosbag2_bagfile_information".into()))?;
+        let num = |v: Option<&serde_yaml::Value>, what: &str| -> Result<u64, BagError> {
+            v.and_then(serde_yaml::Value::as_u64).ok_or_else(|| err(format!("missing or non-numeric {what}")))
+        };
+        let version = num(info.get("version"), "version")?;
+        if !(1..=9).contains(&version) {
+            return Err(err(format!("metadata version {version} is not supported (1 to 9)")));
+        }
+        let storage = info.get("storage_identifier").and_then(serde_yaml::Value::as_str).unwrap_or("").to_string();
+        if storage != "mcap" {
+            return Err(BagError::Unsupported {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "storage {storage:?}: only mcap bags are read (convert sqlite3 bags with `ros2 bag convert`)"
+                ),
+            });
+        }
+        let compression_mode = info.get("compression_mode").and_then(serde_yaml::Value::as_str).unwrap_or("");
+        let compression_format = info.get("compression_format").and_then(serde_yaml::Value::as_str).unwrap_or("");
+        if !compression_mode.is_empty() && compression_mode != "NONE" {
+            return Err(BagError::Unsupported {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "{compression_mode} {compression_format} compression (decompress with `ros2 bag decompress`)"
+                ),
+            });
+        }
+        let start_ns = num(info.get("starting_time").and_then(|s| s.get("nanoseconds_since_epoch")), "starting_time")?;
+        let duration_ns = num(info.get("duration").and_then(|s| s.get("nanoseconds")), "duration")?;
+        let message_count = num(info.get("message_count"), "message_count")?;
+        let mut topics = Vec::new();
+        for (i, t) in info
+            .get("topics_with_message_count")
+            .and_then(serde_yaml::Value::as_sequence)
+            .ok_or_else(|| err("missing topics_with_message_count".into()))?
+            .iter()
+            .enumerate()
+        {
+            let m = t.get("topic_metadata").ok_or_else(|| err(format!("topic {i}: no topic_metadata")))?;
+            let s = |k: &str| m.get(k).and_then(serde_yaml::Value::as_str).map(str::to_string);
+            let qos_value = m.get("offered_qos_profiles").cloned().unwrap_or(serde_yaml::Value::Null);
+            topics.push(TopicMetadata {
+                name: s("name").ok_or_else(|| err(format!("topic {i}: no name")))?,
+                type_name: s("type").ok_or_else(|| err(format!("topic {i}: no type")))?,
+                serialization_format: s("serialization_format").unwrap_or_else(|| "cdr".into()),
+                qos: Qos::from_metadata(&qos_value),
+                qos_text: qos_value.as_str().unwrap_or("").to_string(),
+                message_count: num(t.get("message_count"), &format!("topic {i} message_count"))?,
+            });
+        }
+        let files: Vec<String> = info
+            .get("relative_file_paths")
+            .and_then(serde_yaml::Value::as_sequence)
+            .ok_or_else(|| err("missing relative_file_paths".into()))?
+            .iter()
+            .filter_map(|f| f.as_str().map(str::to_string))
+            .collect();
+        if files.is_empty() {
+            return Err(err("relative_file_paths is empty".into()));
+        }
+        Ok(BagMetadata {
+            version,
+            storage_identifier: storage,
+            start_ns,
+            duration_ns,
+            message_count,
+            topics,
+            files,
+            compression: compression_format.to_string(),
+            ros_distro: info.get("ros_distro").and_then(serde_yaml::Value::as_str).unwrap_or("").to_string(),
+        })
+    }
+}
+
+/// One message read from a bag.
+#[derive(Debug, Clone)]
+pub struct RawMessage {
+    /// Topic.
+    pub topic: String,
+    /// ROS 2 type (from the MCAP schema).
+    pub type_name: String,
+    /// Receive time, ns.
+    pub log_time_ns: u64,
+    /// Send time, ns.
+    pub publish_time_ns: u64,
+    /// CDR payload with its 4-byte header.
+    pub data: Vec<u8>,
+}
+
+/// An opened bag.
+#[derive(Debug, Clone)]
+pub struct Bag {
+    /// The directory.
+    pub dir: PathBuf,
+    /// Its metadata.
+    pub metadata: BagMetadata,
+}
+
+impl Bag {
+    /// Opens a bag directory by reading its `metadata.yaml`.
+    pub fn open(dir: &Path) -> Result<Bag, BagError> {
+        let path = dir.join("metadata.yaml");
+        if !dir.is_dir() {
+            return Err(BagError::Metadata { path: dir.to_path_buf(), reason: "not a bag directory".into() });
+        }
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| BagError::Metadata { path: path.clone(), reason: format!("cannot read: {e}") })?;
+        let metadata = BagMetadata::parse(&text, &path)?;
+        for f in &metadata.files {
+            if !dir.join(f).is_file() {
+                return Err(BagError::Metadata { path, reason: format!("lists file {f}, which does not exist") });
+            }
+        }
+        Ok(Bag { dir: dir.to_path_buf(), metadata })
+    }
+
+    /// Total size of the storage files, bytes.
+    pub fn size_bytes(&self) -> u64 {
+        self.metadata.files.iter().filter_map(|f| std::fs::metadata(self.dir.join(f)).ok()).map(|m| m.len()).sum()
+    }
+
+    /// Every message in file order. After an error (a truncated or corrupt file) the iterator
+    /// ends; the messages before it have been returned.
+    pub fn messages(&self) -> BagMessages {
+        BagMessages {
+            dir: self.dir.clone(),
+            files: self.metadata.files.clone(),
+            next_file: 0,
+            current: None,
+            failed: false,
+        }
+    }
+
+    /// A `ros2 bag info`-style summary.
+    pub fn info(&self) -> String {
+        let m = &self.metadata;
+        let mut s = String::new();
+        let secs = |ns: u64| ns as f64 * 1e-9;
+        let _ = writeln!(s, "Files:             {}", m.files.join(", "));
+        let _ = writeln!(s, "Bag size:          {:.1} MiB", self.size_bytes() as f64 / (1024.0 * 1024.0));
+        let _ = writeln!(s, "Storage id:        {} (metadata version {})", m.storage_identifier, m.version);
+        let _ = writeln!(s, "ROS Distro:        {}", if m.ros_distro.is_empty() { "unknown" } else { &m.ros_distro });
+        let _ = writeln!(s, "Duration:          {:.3}s", secs(m.duration_ns));
+        let _ = writeln!(s, "Start:             {:.9} (s since epoch)", secs(m.start_ns));
+        let _ = writeln!(s, "End:               {:.9} (s since epoch)", secs(m.start_ns + m.duration_ns));
+        let _ = writeln!(s, "Messages:          {}", m.message_count);
+        let w = m.topics.iter().map(|t| t.name.len()).max().unwrap_or(0);
+        for (i, t) in m.topics.iter().enumerate() {
+            let qos = t.qos.map_or("unknown".to_string(), |q| {
+                format!(
+                    "{} {} depth {}",
+                    if q.reliable { "reliable" } else { "best_effort" },
+                    if q.transient_local { "transient_local" } else { "volatile" },
+                    q.depth
+                )
+            });
+            let _ = writeln!(
+                s,
+                "{}Topic: {:w$} | Type: {} | Count: {} | Serialization Format: {} | QoS: {}",
+                if i == 0 { "Topic information: " } else { "                   " },
+                t.name,
+                t.type_name,
+                t.message_count,
+                t.serialization_format,
+                qos
+            );
+        }
+        s
+    }
+}
+
+/// Counts the bytes read through it, so that errors can name a file offset.
+struct Counting<R> {
+    inner: R,
+    count: std::rc::Rc<std::cell::Cell<u64>>,
+}
+impl<R: Read> Read for Counting<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.count.set(self.count.get() + n as u64);
+        Ok(n)
+    }
+}
+
+/// Iterator over a bag's messages.
+pub struct BagMessages {
+    dir: PathBuf,
+    files: Vec<String>,
+    next_file: usize,
+    current: Option<(
+        PathBuf,
+        std::rc::Rc<std::cell::Cell<u64>>,
+        mcap::io::MessageReader<Counting<BufReader<std::fs::File>>>,
+    )>,
+    failed: bool,
+}
+
+impl Iterator for BagMessages {
+    type Item = Result<RawMessage, BagError>;
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if self.failed {
+                return None;
+            }
+            if self.current.is_none() {
+                let f = self.files.get(self.next_file)?;
+                self.next_file += 1;
+                let path = self.dir.join(f);
+                let file = match std::fs::File::open(&path) {
+                    Ok(f) => f,
+                    Err(e) => {
+                        self.failed = true;
+                        return Some(Err(FileError::new(&path, e).into()));
+                    }
+                };
+                let count = std::rc::Rc::new(std::cell::Cell::new(0));
+                let reader =
+                    mcap::io::MessageReader::new(Counting { inner: BufReader::new(file), count: count.clone() });
+                self.current = Some((path, count, reader));
+            }
+            let (path, count, reader) = self.current.as_mut()?;
+            match reader.next() {
+                None => self.current = None,
+                Some(Ok(m)) => {
+                    return Some(Ok(RawMessage {
+                        topic: m.channel.topic.clone(),
+                        type_name: m.channel.schema.as_ref().map(|s| s.name.clone()).unwrap_or_default(),
+                        log_time_ns: m.log_time,
+                        publish_time_ns: m.publish_time,
+                        data: m.data.into_owned(),
+                    }))
+                }
+                Some(Err(e)) => {
+                    self.failed = true;
+                    return Some(Err(mcap_err(path, count.get(), e)));
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("xsurf-bag-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    #[test]
+    fn write_then_read_back() {
+        let dir = tmp("rt");
+        let mut w = BagWriter::create(&dir, BagOptions { zstd: true }).unwrap();
+        w.add_topic("/a", "std_msgs/msg/String", "string data\n", &Qos::RELIABLE).unwrap();
+        w.add_topic("/tf_static", "std_msgs/msg/String", "string data\n", &Qos::STATIC).unwrap();
+        for i in 0..10u64 {
+            w.write("/a", 1000 + i, 1000 + i, &[0, 1, 0, 0, 1, 0, 0, 0, i as u8, 0]).unwrap();
+        }
+        w.write("/tf_static", 999, 999, &[0, 1, 0, 0, 1, 0, 0, 0, 0, 0]).unwrap();
+        assert!(matches!(w.write("/b", 1, 1, &[]), Err(BagError::UnknownTopic(_))));
+        let meta = w.finish().unwrap();
+        assert_eq!(meta.message_count, 11);
+        let bag = Bag::open(&dir).unwrap();
+        assert_eq!(bag.metadata, meta);
+        assert_eq!(bag.metadata.topics[1].qos, Some(Qos::STATIC));
+        let msgs: Vec<_> = bag.messages().collect::<Result<_, _>>().unwrap();
+        assert_eq!(msgs.len(), 11);
+        assert_eq!(msgs[3].data[8], 3);
+        assert!(bag.info().contains("Topic: /a"));
+        assert!(matches!(BagWriter::create(&dir, BagOptions::default()), Err(BagError::Exists(_))));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn truncated_mcap_reads_up_to_the_cut_and_names_the_offset() {
+        let dir = tmp("cut");
+        let mut w = BagWriter::create(&dir, BagOptions::default()).unwrap();
+        w.add_topic("/a", "std_msgs/msg/String", "string data\n", &Qos::RELIABLE).unwrap();
+        for i in 0..2000u64 {
+            w.write("/a", i, i, &[0u8; 64]).unwrap();
+        }
+        let meta = w.finish().unwrap();
+        let file = dir.join(&meta.files[0]);
+        let len = std::fs::metadata(&file).unwrap().len();
+        let f = std::fs::OpenOptions::new().write(true).open(&file).unwrap();
+        f.set_len(len * 2 / 3).unwrap();
+        let bag = Bag::open(&dir).unwrap();
+        let (mut ok, mut err) = (0, None);
+        for m in bag.messages() {
+            match m {
+                Ok(_) => ok += 1,
+                Err(e) => err = Some(e),
+            }
+        }
+        let e = err.expect("truncation reported");
+        assert!(matches!(e, BagError::Mcap { offset, .. } if offset > 0), "{e}");
+        assert!(ok < 2000, "read {ok}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn metadata_errors_name_the_file() {
+        let p = Path::new("/x/metadata.yaml");
+        assert!(matches!(BagMetadata::parse("nope: 1", p), Err(BagError::Metadata { .. })));
+        assert!(matches!(BagMetadata::parse("{{{", p), Err(BagError::Metadata { .. })));
+        let v9 = "rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n  duration: {nanoseconds: 5}\n  starting_time: {nanoseconds_since_epoch: 7}\n  message_count: 1\n  topics_with_message_count:\n    - topic_metadata: {name: /t, type: std_msgs/msg/String, serialization_format: cdr, offered_qos_profiles: [{history: keep_last, depth: 3, reliability: best_effort, durability: volatile}]}\n      message_count: 1\n  relative_file_paths: [a_0.mcap]\n";
+        let m = BagMetadata::parse(v9, p).unwrap();
+        assert_eq!(m.topics[0].qos, Some(Qos { reliable: false, transient_local: false, depth: 3 }));
+        let sqlite = v9.replace("storage_identifier: mcap", "storage_identifier: sqlite3");
+        assert!(matches!(BagMetadata::parse(&sqlite, p), Err(BagError::Unsupported { .. })));
+        assert!(matches!(Bag::open(Path::new("/nonexistent-bag")), Err(BagError::Metadata { .. })));
+    }
+}
