@@ -519,16 +519,16 @@ impl<R: Read> Read for Counting<R> {
     }
 }
 
+/// The MCAP file being read: its path, the bytes read so far, the reader.
+type OpenFile =
+    (PathBuf, std::rc::Rc<std::cell::Cell<u64>>, mcap::io::MessageReader<Counting<BufReader<std::fs::File>>>);
+
 /// Iterator over a bag's messages.
 pub struct BagMessages {
     dir: PathBuf,
     files: Vec<String>,
     next_file: usize,
-    current: Option<(
-        PathBuf,
-        std::rc::Rc<std::cell::Cell<u64>>,
-        mcap::io::MessageReader<Counting<BufReader<std::fs::File>>>,
-    )>,
+    current: Option<OpenFile>,
     failed: bool,
 }
 

@@ -23,7 +23,7 @@ struct Builder {
 
 impl Builder {
     fn view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let mut v = json!({"buffer": 0, "byteOffset": self.bin.len(), "byteLength": bytes.len()});
@@ -134,7 +134,7 @@ pub fn write(w: &mut impl Write, scene: &Scene<'_>) -> std::io::Result<()> {
         "nodes": nodes,
     });
     if !meshes.is_empty() {
-        while b.bin.len() % 4 != 0 {
+        while !b.bin.len().is_multiple_of(4) {
             b.bin.push(0);
         }
         doc["meshes"] = json!(meshes);
@@ -149,7 +149,7 @@ pub fn write(w: &mut impl Write, scene: &Scene<'_>) -> std::io::Result<()> {
         doc["samplers"] = json!(samplers);
     }
     let mut js = serde_json::to_vec(&doc).map_err(std::io::Error::other)?;
-    while js.len() % 4 != 0 {
+    while !js.len().is_multiple_of(4) {
         js.push(b' ');
     }
     let bin_chunk = if b.bin.is_empty() { 0 } else { 8 + b.bin.len() };
