@@ -1,0 +1,173 @@
+//! The transport-agnostic node: messages in, messages out, typed config from parameters.
+//! The same component runs alone over DDS, composed in one process, or driven from a bag.
+
+use crate::params::{ParamDecl, ParamError, Params};
+use std::sync::Arc;
+use xsurf_msgs::{
+    cdr, rosgraph_msgs::Clock, sensor_msgs::CameraInfo, sensor_msgs::Image, sensor_msgs::JointState,
+    sensor_msgs::PointCloud2, tf2_msgs::TFMessage, visualization_msgs::Marker, xsurf_msgs::LaserLine,
+    xsurf_msgs::ScanEvent, RosMessage,
+};
+
+/// A message on a topic; shared so that fan-out copies nothing.
+#[derive(Debug, Clone)]
+pub enum Msg {
+    /// `sensor_msgs/msg/Image`.
+    Image(Arc<Image>),
+    /// `sensor_msgs/msg/CameraInfo`.
+    CameraInfo(Arc<CameraInfo>),
+    /// `tf2_msgs/msg/TFMessage` (on `/tf` or `/tf_static`).
+    Tf(Arc<TFMessage>),
+    /// `xsurf_msgs/msg/LaserLine`.
+    LaserLine(Arc<LaserLine>),
+    /// `sensor_msgs/msg/PointCloud2`.
+    Cloud(Arc<PointCloud2>),
+    /// `visualization_msgs/msg/Marker`.
+    Marker(Arc<Marker>),
+    /// `xsurf_msgs/msg/ScanEvent`.
+    ScanEvent(Arc<ScanEvent>),
+    /// `sensor_msgs/msg/JointState`.
+    JointState(Arc<JointState>),
+    /// `rosgraph_msgs/msg/Clock`.
+    Clock(Arc<Clock>),
+}
+
+/// Why bytes could not become a [`Msg`].
+#[derive(Debug, thiserror::Error)]
+pub enum DecodeError {
+    /// A type this graph does not carry.
+    #[error("unknown message type {0}")]
+    UnknownType(String),
+    /// Bad CDR.
+    #[error("{type_name}: {source}")]
+    Cdr {
+        /// The type.
+        type_name: String,
+        /// The cause.
+        source: cdr::CdrError,
+    },
+}
+
+macro_rules! msg_types {
+    ($($variant:ident => $t:ty),* $(,)?) => {
+        impl Msg {
+            /// The ROS 2 type name.
+            pub fn type_name(&self) -> &'static str {
+                match self { $(Msg::$variant(_) => <$t>::TYPE_NAME,)* }
+            }
+            /// CDR bytes with the encapsulation header.
+            pub fn encode(&self) -> Result<Vec<u8>, cdr::CdrError> {
+                match self { $(Msg::$variant(m) => cdr::encode(m.as_ref()),)* }
+            }
+            /// Decodes CDR bytes of the named type.
+            pub fn decode(type_name: &str, bytes: &[u8]) -> Result<Msg, DecodeError> {
+                $(if type_name == <$t>::TYPE_NAME {
+                    return cdr::decode::<$t>(bytes)
+                        .map(|m| Msg::$variant(Arc::new(m)))
+                        .map_err(|source| DecodeError::Cdr { type_name: type_name.into(), source });
+                })*
+                Err(DecodeError::UnknownType(type_name.to_string()))
+            }
+            /// The `.msg` definition with dependencies, for bags.
+            pub fn definition(type_name: &str) -> Option<String> {
+                $(if type_name == <$t>::TYPE_NAME { return Some(<$t>::definition()); })*
+                None
+            }
+            /// Every type name a [`Msg`] can carry.
+            pub const TYPE_NAMES: &'static [&'static str] = &[$(<$t>::TYPE_NAME),*];
+        }
+    };
+}
+
+msg_types! {
+    Image => Image,
+    CameraInfo => CameraInfo,
+    Tf => TFMessage,
+    LaserLine => LaserLine,
+    Cloud => PointCloud2,
+    Marker => Marker,
+    ScanEvent => ScanEvent,
+    JointState => JointState,
+    Clock => Clock,
+}
+
+/// Quality of service by topic class (each overridable by the `qos.<class>.*` parameters of
+/// the DDS host).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum QosClass {
+    /// Camera streams: best effort, depth 5.
+    Sensor,
+    /// Clouds, meshes, lines, events, `/tf`: reliable, depth 10.
+    Reliable,
+    /// `/tf_static`: reliable, transient local, depth 1.
+    Static,
+}
+
+/// One input or output of a component.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Port {
+    /// Default topic name (relative names are placed in the node's namespace).
+    pub topic: String,
+    /// ROS 2 type name.
+    pub type_name: &'static str,
+    /// QoS class.
+    pub qos: QosClass,
+}
+
+impl Port {
+    /// A port.
+    pub fn new(topic: &str, type_name: &'static str, qos: QosClass) -> Port {
+        Port { topic: topic.to_string(), type_name, qos }
+    }
+}
+
+/// Messages a component publishes while handling one input: `(output index, message)`.
+#[derive(Debug, Default)]
+pub struct Outbox {
+    /// Queued messages.
+    pub items: Vec<(usize, Msg)>,
+}
+
+impl Outbox {
+    /// Publishes `msg` on output `port`.
+    pub fn publish(&mut self, port: usize, msg: Msg) {
+        self.items.push((port, msg));
+    }
+}
+
+/// A failure handling one message: logged and counted by the host; the node goes on.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct NodeError(pub String);
+
+impl NodeError {
+    /// An error from anything displayable.
+    pub fn new(e: impl std::fmt::Display) -> Self {
+        NodeError(e.to_string())
+    }
+}
+
+/// A node's logic, independent of the transport.
+pub trait Component: Send {
+    /// The node's default name (`edge_detector`, ...).
+    fn node_name(&self) -> &'static str;
+    /// Inputs, in the order `handle` numbers them.
+    fn inputs(&self) -> Vec<Port>;
+    /// Outputs, in the order `Outbox::publish` numbers them.
+    fn outputs(&self) -> Vec<Port>;
+    /// The parameters the node declares.
+    fn declarations(&self) -> Vec<ParamDecl>;
+    /// Applies a new set of parameter values; a set that fails validation is refused and the
+    /// old configuration stays.
+    fn reconfigure(&mut self, params: &Params) -> Result<(), ParamError>;
+    /// Handles one message from input `input`.
+    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError>;
+    /// Called periodically with the node's clock (ns since the epoch).
+    fn tick(&mut self, _now_ns: i64, _out: &mut Outbox) {}
+    /// No more input is coming (end of a bag, or shutdown): flush what is pending.
+    fn finish(&mut self, _out: &mut Outbox) {}
+    /// Counters for reports and logs, as `(name, value)`.
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        Vec::new()
+    }
+}

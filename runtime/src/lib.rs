@@ -1,0 +1,11 @@
+//! # xsurf-runtime
+//!
+//! Hosting for xsurf's nodes: the ROS 2 command line and params files ([`rosargs`]),
+//! parameter values and declarations ([`params`]), the transport-agnostic component API
+//! ([`component`]) and the in-memory composition of several components ([`router`]).
+#![deny(missing_docs)]
+
+pub mod component;
+pub mod params;
+pub mod rosargs;
+pub mod router;

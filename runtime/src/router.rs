@@ -1,0 +1,139 @@
+//! Several components in one process, connected in memory: a published message is handed to
+//! every subscriber before the publish call returns (depth first, no queue, so nothing can be
+//! dropped), and to an optional tap that forwards every topic to outside observers (DDS, a bag).
+
+use crate::component::{Component, Msg, Outbox, Port};
+use crate::params::Params;
+use crate::rosargs::{fq_name, resolve_topic, Remap};
+use std::collections::HashMap;
+
+/// A component placed in the graph.
+pub struct Placed {
+    /// The component.
+    pub component: Box<dyn Component>,
+    /// Its node name.
+    pub name: String,
+    /// Its namespace.
+    pub namespace: String,
+    /// Resolved input topics.
+    pub inputs: Vec<(Port, String)>,
+    /// Resolved output topics.
+    pub outputs: Vec<(Port, String)>,
+    /// Messages it failed to handle.
+    pub errors: u64,
+    /// Messages it handled.
+    pub handled: u64,
+}
+
+impl Placed {
+    /// The fully qualified node name.
+    pub fn fq_name(&self) -> String {
+        fq_name(&self.namespace, &self.name)
+    }
+}
+
+/// Callback for every message published in the graph: `(topic, message)`.
+pub type Tap = Box<dyn FnMut(&str, &Msg)>;
+
+/// The in-memory graph.
+#[derive(Default)]
+pub struct Router {
+    nodes: Vec<Placed>,
+    subs: HashMap<String, Vec<(usize, usize)>>,
+    tap: Option<Tap>,
+}
+
+impl Router {
+    /// An empty graph.
+    pub fn new() -> Self {
+        Self::default()
+    }
+    /// Sets the tap.
+    pub fn set_tap(&mut self, tap: Tap) {
+        self.tap = Some(tap);
+    }
+    /// Adds a component as node `namespace/name` with remaps; returns its index.
+    pub fn add(&mut self, component: Box<dyn Component>, name: &str, namespace: &str, remaps: &[Remap]) -> usize {
+        let resolve = |p: Port| {
+            let t = resolve_topic(&p.topic, namespace, name, remaps);
+            (p, t)
+        };
+        let inputs: Vec<_> = component.inputs().into_iter().map(resolve).collect();
+        let outputs: Vec<_> = component.outputs().into_iter().map(resolve).collect();
+        let idx = self.nodes.len();
+        for (i, (_, t)) in inputs.iter().enumerate() {
+            self.subs.entry(t.clone()).or_default().push((idx, i));
+        }
+        self.nodes.push(Placed {
+            component,
+            name: name.to_string(),
+            namespace: namespace.to_string(),
+            inputs,
+            outputs,
+            errors: 0,
+            handled: 0,
+        });
+        idx
+    }
+    /// The nodes.
+    pub fn nodes(&self) -> &[Placed] {
+        &self.nodes
+    }
+    /// A node, mutably (to reconfigure it).
+    pub fn node_mut(&mut self, idx: usize) -> Option<&mut Placed> {
+        self.nodes.get_mut(idx)
+    }
+    /// True if any node subscribes to `topic`.
+    pub fn has_subscriber(&self, topic: &str) -> bool {
+        self.subs.contains_key(topic)
+    }
+    /// Publishes `msg` on `topic` from outside the graph.
+    pub fn publish(&mut self, topic: &str, msg: &Msg) {
+        if let Some(tap) = self.tap.as_mut() {
+            tap(topic, msg);
+        }
+        let Some(subs) = self.subs.get(topic).cloned() else { return };
+        for (node, input) in subs {
+            let mut out = Outbox::default();
+            let n = &mut self.nodes[node];
+            n.handled += 1;
+            if let Err(e) = n.component.handle(input, msg, &mut out) {
+                n.errors += 1;
+                log::warn!("{}: message on {topic} refused: {e}", n.fq_name());
+            }
+            self.deliver(node, out);
+        }
+    }
+    fn deliver(&mut self, node: usize, out: Outbox) {
+        for (port, msg) in out.items {
+            let Some((_, topic)) = self.nodes[node].outputs.get(port).cloned() else {
+                log::error!("{}: published on undeclared output {port}", self.nodes[node].fq_name());
+                continue;
+            };
+            self.publish(&topic, &msg);
+        }
+    }
+    /// Ticks every node with the graph's clock.
+    pub fn tick(&mut self, now_ns: i64) {
+        for i in 0..self.nodes.len() {
+            let mut out = Outbox::default();
+            self.nodes[i].component.tick(now_ns, &mut out);
+            self.deliver(i, out);
+        }
+    }
+    /// Tells every node, in the order they were added, that no more input is coming.
+    pub fn finish(&mut self) {
+        for i in 0..self.nodes.len() {
+            let mut out = Outbox::default();
+            self.nodes[i].component.finish(&mut out);
+            self.deliver(i, out);
+        }
+    }
+    /// Applies parameters to node `idx` (validated by the component).
+    pub fn reconfigure(&mut self, idx: usize, params: &Params) -> Result<(), crate::params::ParamError> {
+        match self.nodes.get_mut(idx) {
+            Some(n) => n.component.reconfigure(params),
+            None => Err(crate::params::ParamError::Undeclared(format!("node {idx}"))),
+        }
+    }
+}
