@@ -356,6 +356,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::approx_constant)] // the docs example's literal values
     fn ros2_docs_examples() {
         // From the ROS 2 "Passing ROS arguments to nodes via the command-line" page.
         let a = p(&["--ros-args", "--remap", "__node:=my_node", "--remap", "__ns:=/demo"]).unwrap();
@@ -443,7 +444,7 @@ cam2:
         assert_eq!(b["method"], ParamValue::String("parabolic".into()));
         assert_eq!(b["min_strength"], ParamValue::Double(5.0));
         let c = params_from_yaml(y, "/merger").unwrap();
-        assert!(c.get("method").is_none());
+        assert!(!c.contains_key("method"));
         assert!(params_from_yaml("- a\n- b\n", "/n").is_err());
         assert!(params_from_yaml("/n:\n  ros__parameters:\n    x: {a: [1, b]}\n", "/n").is_err());
     }
