@@ -1,1 +1,13 @@
-//! placeholder
+//! # xsurf-nodes
+//!
+//! The nodes of the spec as transport-agnostic components ([`components`]), the conversions
+//! between messages and the algorithms ([`convert`]), the scanner's tf view ([`tf`]), the
+//! synthetic scan writer ([`synth`]) and offline reconstruction from a bag ([`offline`]).
+#![deny(missing_docs)]
+
+pub mod components;
+pub mod convert;
+pub mod logging;
+pub mod offline;
+pub mod synth;
+pub mod tf;

@@ -155,6 +155,8 @@ pub trait Component: Send {
     fn inputs(&self) -> Vec<Port>;
     /// Outputs, in the order `Outbox::publish` numbers them.
     fn outputs(&self) -> Vec<Port>;
+    /// Tells the component where it was placed (node name and namespace), before any message.
+    fn set_identity(&mut self, _name: &str, _namespace: &str) {}
     /// The parameters the node declares.
     fn declarations(&self) -> Vec<ParamDecl>;
     /// Applies a new set of parameter values; a set that fails validation is refused and the

@@ -23,6 +23,8 @@ pub struct Placed {
     pub errors: u64,
     /// Messages it handled.
     pub handled: u64,
+    /// Time spent in its handlers, ns.
+    pub busy_ns: u64,
 }
 
 impl Placed {
@@ -53,7 +55,8 @@ impl Router {
         self.tap = Some(tap);
     }
     /// Adds a component as node `namespace/name` with remaps; returns its index.
-    pub fn add(&mut self, component: Box<dyn Component>, name: &str, namespace: &str, remaps: &[Remap]) -> usize {
+    pub fn add(&mut self, mut component: Box<dyn Component>, name: &str, namespace: &str, remaps: &[Remap]) -> usize {
+        component.set_identity(name, namespace);
         let resolve = |p: Port| {
             let t = resolve_topic(&p.topic, namespace, name, remaps);
             (p, t)
@@ -72,6 +75,7 @@ impl Router {
             outputs,
             errors: 0,
             handled: 0,
+            busy_ns: 0,
         });
         idx
     }
@@ -97,7 +101,10 @@ impl Router {
             let mut out = Outbox::default();
             let n = &mut self.nodes[node];
             n.handled += 1;
-            if let Err(e) = n.component.handle(input, msg, &mut out) {
+            let t0 = std::time::Instant::now();
+            let r = n.component.handle(input, msg, &mut out);
+            n.busy_ns += t0.elapsed().as_nanos() as u64;
+            if let Err(e) = r {
                 n.errors += 1;
                 log::warn!("{}: message on {topic} refused: {e}", n.fq_name());
             }
@@ -117,7 +124,9 @@ impl Router {
     pub fn tick(&mut self, now_ns: i64) {
         for i in 0..self.nodes.len() {
             let mut out = Outbox::default();
+            let t0 = std::time::Instant::now();
             self.nodes[i].component.tick(now_ns, &mut out);
+            self.nodes[i].busy_ns += t0.elapsed().as_nanos() as u64;
             self.deliver(i, out);
         }
     }
@@ -125,7 +134,9 @@ impl Router {
     pub fn finish(&mut self) {
         for i in 0..self.nodes.len() {
             let mut out = Outbox::default();
+            let t0 = std::time::Instant::now();
             self.nodes[i].component.finish(&mut out);
+            self.nodes[i].busy_ns += t0.elapsed().as_nanos() as u64;
             self.deliver(i, out);
         }
     }

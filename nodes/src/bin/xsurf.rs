@@ -1,0 +1,288 @@
+//! `xsurf`: the offline tools.
+//!
+//! ```text
+//! xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S]
+//! xsurf synth SCENE -o DIR [--size WxH] [--speed M_S] [--fps F] [--encoding E] [--seed N] [--zstd]
+//! xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
+//! xsurf bag info DIR
+//! ```
+//! None of these opens a DDS participant.
+
+use anyhow::{anyhow, bail, Context};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use xsurf_core::eval;
+use xsurf_core::image::Encoding;
+use xsurf_core::rig::Rig;
+use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene, SCENE_NAMES};
+use xsurf_nodes::{offline, synth};
+
+const USAGE: &str = "usage:
+  xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S]
+      synthesize a scan, reconstruct it, write the files and report the accuracy (default out: ./xsurf-demo)
+  xsurf synth SCENE -o DIR [--size WxH] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--zstd]
+      write a synthetic scan as a rosbag2 bag plus its ground truth (scenes: pyramid, phantom, sphere, cylinder, box, body)
+  xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
+      reconstruct a recorded scan offline: DIR/<cam>.ply, merged.ply, scene.wrl, scene.glb, report.json
+  xsurf bag info DIR
+      summarize a bag, like `ros2 bag info`";
+
+/// A command-line mistake: exit code 2.
+#[derive(Debug)]
+struct UsageError(String);
+impl std::fmt::Display for UsageError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}\n{USAGE}", self.0)
+    }
+}
+impl std::error::Error for UsageError {}
+
+fn usage(msg: impl Into<String>) -> anyhow::Error {
+    anyhow!(UsageError(msg.into()))
+}
+
+/// Simple option parsing: `--name value` pairs and positionals.
+struct Args {
+    positional: Vec<String>,
+    opts: Vec<(String, Option<String>)>,
+}
+
+impl Args {
+    fn parse(args: &[String], flags: &[&str], valued: &[&str]) -> anyhow::Result<Args> {
+        let mut a = Args { positional: vec![], opts: vec![] };
+        let mut i = 0;
+        while i < args.len() {
+            let s = &args[i];
+            if valued.contains(&s.as_str()) {
+                let v = args.get(i + 1).ok_or_else(|| usage(format!("{s} needs a value")))?;
+                a.opts.push((s.clone(), Some(v.clone())));
+                i += 2;
+            } else if flags.contains(&s.as_str()) {
+                a.opts.push((s.clone(), None));
+                i += 1;
+            } else if s.starts_with('-') && s.len() > 1 {
+                return Err(usage(format!("unknown option {s}")));
+            } else {
+                a.positional.push(s.clone());
+                i += 1;
+            }
+        }
+        Ok(a)
+    }
+    fn get(&self, name: &str) -> Option<&str> {
+        self.opts.iter().rev().find(|o| o.0 == name).and_then(|o| o.1.as_deref())
+    }
+    fn has(&self, name: &str) -> bool {
+        self.opts.iter().any(|o| o.0 == name)
+    }
+    fn num<T: std::str::FromStr>(&self, name: &str, default: T) -> anyhow::Result<T> {
+        match self.get(name) {
+            None => Ok(default),
+            Some(v) => v.parse().map_err(|_| usage(format!("{name}: {v:?} is not a number"))),
+        }
+    }
+}
+
+fn size(a: &Args) -> anyhow::Result<(u32, u32)> {
+    let s = a.get("--size").unwrap_or("640x480");
+    let (w, h) = s.split_once('x').ok_or_else(|| usage(format!("--size {s}: expected WxH")))?;
+    let (w, h): (u32, u32) =
+        (w.parse().map_err(|_| usage("--size: bad width"))?, h.parse().map_err(|_| usage("--size: bad height"))?);
+    if !(32..=8192).contains(&w) || !(32..=8192).contains(&h) {
+        return Err(usage(format!("--size {s}: width and height must be in 32..=8192")));
+    }
+    Ok((w, h))
+}
+
+fn scanner(a: &Args, scene: &str) -> anyhow::Result<Scanner> {
+    let scene = Scene::by_name(scene)
+        .ok_or_else(|| usage(format!("unknown scene {scene:?} (known: {})", SCENE_NAMES.join(", "))))?;
+    let (w, h) = size(a)?;
+    let encoding = match a.get("--encoding").unwrap_or("mono8") {
+        "mono8" => Encoding::Mono8,
+        "rgb8" => Encoding::Rgb8,
+        "bgr8" => Encoding::Bgr8,
+        other => return Err(usage(format!("--encoding {other}: expected mono8, rgb8 or bgr8"))),
+    };
+    let settings = ScanSettings {
+        speed_mps: a.num("--speed", 0.070)?,
+        fps: a.num("--fps", 30.0)?,
+        seed: a.num("--seed", 1u64)?,
+        encoding,
+        ..ScanSettings::default()
+    };
+    Ok(Scanner::new(scene, Rig::study(w, h), LaserModel::default(), settings)?)
+}
+
+fn progress_printer(label: &'static str) -> impl FnMut(u32, u32) {
+    let mut last = std::time::Instant::now();
+    move |done, total| {
+        if done == total || last.elapsed().as_secs_f64() > 2.0 {
+            last = std::time::Instant::now();
+            eprintln!("{label}: {done}/{total} frames");
+        }
+    }
+}
+
+fn cmd_synth(args: &[String]) -> anyhow::Result<()> {
+    let a = Args::parse(args, &["--zstd"], &["-o", "--out", "--size", "--speed", "--fps", "--encoding", "--seed"])?;
+    let [scene] = a.positional.as_slice() else { return Err(usage("synth needs one SCENE")) };
+    let out = a.get("-o").or(a.get("--out")).ok_or_else(|| usage("synth needs -o DIR"))?;
+    let s = scanner(&a, scene)?;
+    let summary = synth::write_bag(Path::new(out), &s, a.has("--zstd"), 1, progress_printer("synth"))?;
+    println!(
+        "wrote {out}: scene {}, {} frames x {} cameras, {} messages; ground truth in {out}/truth.json",
+        summary.scene,
+        summary.frames,
+        summary.cameras.len(),
+        summary.messages
+    );
+    Ok(())
+}
+
+fn cmd_reconstruct(args: &[String]) -> anyhow::Result<()> {
+    let a = Args::parse(args, &["--quiet"], &["--params-file", "--xray", "--out", "-o"])?;
+    let [bag] = a.positional.as_slice() else { return Err(usage("reconstruct needs one BAG")) };
+    let out = a.get("--out").or(a.get("-o")).ok_or_else(|| usage("reconstruct needs --out DIR"))?;
+    if let Some(x) = a.get("--xray") {
+        bail!("--xray {x}: the radiograph overlay is not available yet (issue: the radiograph under the surface)");
+    }
+    let opts = offline::Options {
+        bag: PathBuf::from(bag),
+        params_file: a.get("--params-file").map(PathBuf::from),
+        out: PathBuf::from(out),
+        progress: !a.has("--quiet"),
+    };
+    let r = offline::reconstruct(&opts)?;
+    print_report(&r, out);
+    Ok(())
+}
+
+fn print_report(r: &offline::Report, out: &str) {
+    println!(
+        "reconstructed {} ({} cameras, scans {:?}) in {:.2} s, {:.0} frames/s",
+        r.bag,
+        r.cameras.len(),
+        r.scans,
+        r.timings_s.get("total").copied().unwrap_or(0.0),
+        r.frames_per_second
+    );
+    for c in &r.cameras {
+        println!(
+            "  {c}: {} frames read, {} with a line, {} points, {} triangles, {} dropped",
+            r.frames_read.get(c).unwrap_or(&0),
+            r.frames_with_line.get(c).unwrap_or(&0),
+            r.points.get(c).unwrap_or(&0),
+            r.triangles.get(c).unwrap_or(&0),
+            r.dropped_frames.get(c).unwrap_or(&0)
+        );
+    }
+    println!("  merged: {} points, {} triangles", r.merged_points, r.merged_triangles);
+    if let Some(t) = &r.truncated {
+        println!("  WARNING: the bag ended early; reconstructed up to the cut: {t}");
+    }
+    println!("files in {out}: {}", r.files.join(", "));
+}
+
+fn cmd_demo(args: &[String]) -> anyhow::Result<()> {
+    let a = Args::parse(args, &[], &["--out", "-o", "--scene", "--size", "--speed"])?;
+    if !a.positional.is_empty() {
+        return Err(usage(format!("demo takes no positional arguments, got {:?}", a.positional)));
+    }
+    let out = PathBuf::from(a.get("--out").or(a.get("-o")).unwrap_or("xsurf-demo"));
+    let scene = a.get("--scene").unwrap_or("pyramid");
+    let s = scanner(&a, scene)?;
+    let bag = out.join("bag");
+    if bag.exists() {
+        std::fs::remove_dir_all(&bag).with_context(|| format!("cannot clear {}", bag.display()))?;
+    }
+    let recon = out.join("reconstruction");
+    if recon.exists() {
+        std::fs::remove_dir_all(&recon).with_context(|| format!("cannot clear {}", recon.display()))?;
+    }
+    println!("1/3 synthesizing a {} scan ({} frames, 2 cameras) into {}", scene, s.frame_count(), bag.display());
+    let summary = synth::write_bag(&bag, &s, true, 1, progress_printer("synth"))?;
+    println!("2/3 reconstructing into {}", recon.display());
+    let r = offline::reconstruct(&offline::Options {
+        bag: bag.clone(),
+        params_file: Some(bag.join("params.yaml")),
+        out: recon.clone(),
+        progress: true,
+    })?;
+    print_report(&r, &recon.display().to_string());
+    println!("3/3 accuracy against the synthetic scanner's ground truth:");
+    let merged =
+        xsurf_formats::ply::read(&mut std::io::BufReader::new(std::fs::File::open(recon.join("merged.ply"))?))?;
+    let acc = eval::accuracy(eval::surface_errors(&s.scene, &merged.positions));
+    let mut truth = Vec::new();
+    for c in &summary.cameras {
+        let t = xsurf_formats::ply::read(&mut std::io::BufReader::new(std::fs::File::open(
+            bag.join(format!("truth_{c}.ply")),
+        )?))?;
+        truth.extend(t.positions.iter().map(|p| xsurf_core::geom::Vec3::new(p[0].into(), p[1].into(), p[2].into())));
+    }
+    let cov = eval::coverage(&truth, &merged.positions, 0.003);
+    println!(
+        "  {} points: RMS error {:.3} mm, 99th percentile {:.3} mm, max {:.3} mm, {:.3} % beyond 2 mm; coverage {:.1} % of what the cameras observe",
+        acc.points,
+        acc.rms_m * 1e3,
+        acc.p99_m * 1e3,
+        acc.max_m * 1e3,
+        acc.outlier_fraction_2mm * 100.0,
+        cov * 100.0
+    );
+    if let Some(e) = eval::pyramid_extents(&s.scene, &merged.positions) {
+        println!(
+            "  pyramid measured: base {:.2} x {:.2} mm, height {:.2} mm (true 210 x 297, 86 mm)",
+            e.base_x_m * 1e3,
+            e.base_y_m * 1e3,
+            e.height_m * 1e3
+        );
+    }
+    let acc_json = serde_json::json!({"rms_m": acc.rms_m, "p99_m": acc.p99_m, "max_m": acc.max_m, "outlier_fraction_2mm": acc.outlier_fraction_2mm, "coverage": cov, "points": acc.points});
+    xsurf_formats::write_bytes_atomic(&out.join("accuracy.json"), serde_json::to_string_pretty(&acc_json)?.as_bytes())?;
+    println!(
+        "open {} (VRML) or {} (glTF) to look at the surface",
+        recon.join("scene.wrl").display(),
+        recon.join("scene.glb").display()
+    );
+    Ok(())
+}
+
+fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
+    match args.first().map(String::as_str) {
+        Some("info") => {
+            let [dir] = &args[1..] else { return Err(usage("bag info needs one DIR")) };
+            let bag = xsurf_formats::bag::Bag::open(Path::new(dir))?;
+            print!("{}", bag.info());
+            Ok(())
+        }
+        Some(other) => Err(usage(format!("unknown bag command {other:?} (info)"))),
+        None => Err(usage("bag needs a command (info)")),
+    }
+}
+
+fn main() -> ExitCode {
+    xsurf_nodes::logging::init(log::LevelFilter::Info, vec![]);
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let r = match args.first().map(String::as_str) {
+        Some("demo") => cmd_demo(&args[1..]),
+        Some("synth") => cmd_synth(&args[1..]),
+        Some("reconstruct") => cmd_reconstruct(&args[1..]),
+        Some("bag") => cmd_bag(&args[1..]),
+        Some("-h" | "--help" | "help") => {
+            println!("{USAGE}");
+            Ok(())
+        }
+        Some(other) => Err(usage(format!("unknown command {other:?}"))),
+        None => Err(usage("no command given")),
+    };
+    match r {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            let is_usage = e.downcast_ref::<UsageError>().is_some();
+            eprintln!("xsurf: error: {e:#}");
+            ExitCode::from(if is_usage { 2 } else { 1 })
+        }
+    }
+}

@@ -1,0 +1,178 @@
+//! `edge_detector`: `image_raw` -> `laser_line`, one sample per image row (or column).
+
+use super::decl;
+use crate::convert;
+use std::sync::Arc;
+use xsurf_core::edge::{Channel, EdgeConfig, EdgeDetector, LaserLine, Method, Orientation, Roi};
+use xsurf_msgs::xsurf_msgs::LaserLine as LineMsg;
+use xsurf_msgs::RosMessage;
+use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+
+/// The parameters of `edge_detector`.
+pub fn declarations() -> Vec<ParamDecl> {
+    let d = EdgeConfig::default();
+    vec![
+        decl(
+            "method",
+            V::String("center_of_gravity".into()),
+            "",
+            "center_of_gravity, gaussian, parabolic, or gradient (the study's method)",
+        ),
+        decl(
+            "line_orientation",
+            V::String("vertical".into()),
+            "",
+            "vertical: one sample per image row; horizontal: one per column",
+        ),
+        decl("channel", V::String("red".into()), "", "signal of colour images: red, luma, red_minus_others"),
+        decl("roi.x_offset", V::Integer(0), "px", "first column searched"),
+        decl("roi.y_offset", V::Integer(0), "px", "first row searched"),
+        decl("roi.width", V::Integer(0), "px", "columns searched (0: to the edge)"),
+        decl("roi.height", V::Integer(0), "px", "rows searched (0: to the edge)"),
+        decl(
+            "min_strength",
+            V::Double(d.min_strength.into()),
+            "grey levels",
+            "smallest peak height above the local background (8-bit scale)",
+        ),
+        decl(
+            "noise_factor",
+            V::Double(d.noise_factor.into()),
+            "",
+            "the peak must also exceed this many local noise standard deviations",
+        ),
+        decl(
+            "peak_fraction",
+            V::Double(d.peak_fraction.into()),
+            "",
+            "samples above background + this fraction of the peak take part in the centre",
+        ),
+        decl(
+            "max_half_width_px",
+            V::Integer(d.max_half_width_px.into()),
+            "px",
+            "largest half-width searched around a peak",
+        ),
+        decl("flank_px", V::Integer(d.flank_px.into()), "px", "length of each background flank"),
+        decl("max_width_px", V::Double(d.max_width_px.into()), "px", "wider peaks (FWHM) are rejected as smeared"),
+        decl(
+            "gradient_threshold",
+            V::Double(d.gradient_threshold.into()),
+            "grey levels",
+            "for method gradient: the five-pixel rise that marks the line",
+        ),
+        decl(
+            "color_offset_px",
+            V::Double(d.color_offset_px.into()),
+            "px",
+            "colour is sampled this far either side of the line",
+        ),
+    ]
+}
+
+fn u32_param(p: &Params, name: &str) -> Result<u32, ParamError> {
+    let v = p.i64(name)?;
+    u32::try_from(v).map_err(|_| Params::invalid(name, format!("{v} is not in 0..=4294967295")))
+}
+
+/// The typed configuration from parameters (also the run-time validator).
+pub fn config(p: &Params) -> Result<EdgeConfig, ParamError> {
+    let method = p.string("method")?;
+    let orient = p.string("line_orientation")?;
+    let channel = p.string("channel")?;
+    let c = EdgeConfig {
+        method: Method::parse(&method)
+            .ok_or_else(|| Params::invalid("method", format!("unknown method {method:?}")))?,
+        line_orientation: Orientation::parse(&orient)
+            .ok_or_else(|| Params::invalid("line_orientation", format!("{orient:?} is not vertical or horizontal")))?,
+        channel: Channel::parse(&channel)
+            .ok_or_else(|| Params::invalid("channel", format!("unknown channel {channel:?}")))?,
+        roi: Roi {
+            x_offset: u32_param(p, "roi.x_offset")?,
+            y_offset: u32_param(p, "roi.y_offset")?,
+            width: u32_param(p, "roi.width")?,
+            height: u32_param(p, "roi.height")?,
+        },
+        min_strength: p.f64("min_strength")? as f32,
+        noise_factor: p.f64("noise_factor")? as f32,
+        peak_fraction: p.f64("peak_fraction")? as f32,
+        max_half_width_px: u32_param(p, "max_half_width_px")?,
+        flank_px: u32_param(p, "flank_px")?,
+        max_width_px: p.f64("max_width_px")? as f32,
+        gradient_threshold: p.f64("gradient_threshold")? as f32,
+        color_offset_px: p.f64("color_offset_px")? as f32,
+    };
+    c.validate().map_err(|e| match e {
+        xsurf_core::edge::EdgeError::InvalidConfig { name, reason } => Params::invalid(name, reason),
+        other => Params::invalid("edge_detector", other.to_string()),
+    })?;
+    Ok(c)
+}
+
+/// The edge detector component.
+pub struct EdgeDetectorNode {
+    detector: EdgeDetector,
+    line: LaserLine,
+    frames: u64,
+    samples_found: u64,
+    frames_with_line: u64,
+    bad_images: u64,
+}
+
+impl EdgeDetectorNode {
+    /// Builds the node from its parameters.
+    pub fn new(p: &Params) -> Result<Self, ParamError> {
+        let detector = EdgeDetector::new(config(p)?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
+        Ok(Self {
+            detector,
+            line: LaserLine::default(),
+            frames: 0,
+            samples_found: 0,
+            frames_with_line: 0,
+            bad_images: 0,
+        })
+    }
+}
+
+impl Component for EdgeDetectorNode {
+    fn node_name(&self) -> &'static str {
+        "edge_detector"
+    }
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("image_raw", xsurf_msgs::sensor_msgs::Image::TYPE_NAME, QosClass::Sensor)]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("laser_line", LineMsg::TYPE_NAME, QosClass::Reliable)]
+    }
+    fn declarations(&self) -> Vec<ParamDecl> {
+        declarations()
+    }
+    fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
+        self.detector = EdgeDetector::new(config(p)?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
+        Ok(())
+    }
+    fn handle(&mut self, _input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+        let Msg::Image(img) = msg else {
+            return Err(NodeError::new(format!("expected an Image, got {}", msg.type_name())));
+        };
+        let view = img.view().map_err(|e| {
+            self.bad_images += 1;
+            NodeError::new(format!("image at {}.{:09}: {e}", img.header.stamp.sec, img.header.stamp.nanosec))
+        })?;
+        let stats = self.detector.detect(&view, &mut self.line).map_err(NodeError::new)?;
+        self.frames += 1;
+        self.samples_found += u64::from(stats.found);
+        self.frames_with_line += u64::from(stats.found > 0);
+        out.publish(0, Msg::LaserLine(Arc::new(convert::line_msg(&self.line, img.header.clone()))));
+        Ok(())
+    }
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![
+            ("frames", self.frames),
+            ("frames_with_line", self.frames_with_line),
+            ("samples_found", self.samples_found),
+            ("bad_images", self.bad_images),
+        ]
+    }
+}

@@ -1,0 +1,288 @@
+//! `merger`: the cameras' organized clouds (`/<cam>/cloud` for each name in `cameras`) ->
+//! one surface in `table` (`/surface/cloud`, `/surface/mesh`) after each END, and the files
+//! `<output_dir>/scan_<id>/{merged.ply, scene.wrl, scene.glb}`.
+//!
+//! The cameras are placed by calibration (their clouds are already in `table`); each grid is
+//! meshed and the surfaces are combined. The merge waits `merge_delay_s` after END so the
+//! meshers' final clouds arrive first.
+
+use super::decl;
+use crate::convert;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use xsurf_core::mesh::{mesh_grid, Grid, Mesh, MeshConfig};
+use xsurf_formats::scene::{Scene, Surface};
+use xsurf_msgs::pointcloud;
+use xsurf_msgs::sensor_msgs::PointCloud2;
+use xsurf_msgs::visualization_msgs::Marker;
+use xsurf_msgs::xsurf_msgs::ScanEvent;
+use xsurf_msgs::RosMessage;
+use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+
+/// The parameters of `merger`.
+pub fn declarations() -> Vec<ParamDecl> {
+    let d = MeshConfig::default();
+    vec![
+        decl(
+            "cameras",
+            V::StringArray(vec!["cam1".into(), "cam2".into()]),
+            "",
+            "camera namespaces whose /<cam>/cloud are merged",
+        ),
+        decl("merge_delay_s", V::Double(1.0), "s", "wait after END before merging, so the final clouds arrive first"),
+        decl(
+            "max_edge_m",
+            V::Double(d.max_edge_m.into()),
+            "m",
+            "longest triangle edge when meshing each camera's grid",
+        ),
+        decl("min_angle_deg", V::Double(d.min_angle_deg.into()), "deg", "smallest triangle angle"),
+        decl("transparency", V::Double(0.3), "", "surface transparency in the VRML and glTF scenes, 0..1"),
+        decl(
+            "output_dir",
+            V::String(String::new()),
+            "",
+            "if set, each scan's merged.ply, scene.wrl and scene.glb go to <output_dir>/scan_<id>/",
+        ),
+        decl("frame_id", V::String("table".into()), "", "frame of the merged cloud and mesh"),
+    ]
+}
+
+struct Config {
+    cameras: Vec<String>,
+    delay_ns: i64,
+    mesh: MeshConfig,
+    transparency: f32,
+    output_dir: Option<PathBuf>,
+    frame_id: String,
+}
+
+fn config(p: &Params) -> Result<Config, ParamError> {
+    let cameras = p.string_array("cameras")?;
+    if cameras.is_empty() || cameras.iter().any(|c| c.is_empty() || c.contains(char::is_whitespace)) {
+        return Err(Params::invalid("cameras", format!("{cameras:?}: needs one or more camera names")));
+    }
+    let delay = p.f64("merge_delay_s")?;
+    if !(0.0..=600.0).contains(&delay) {
+        return Err(Params::invalid("merge_delay_s", format!("{delay} is not in [0, 600]")));
+    }
+    let mesh = MeshConfig {
+        max_edge_m: p.f64("max_edge_m")? as f32,
+        min_angle_deg: p.f64("min_angle_deg")? as f32,
+        ..MeshConfig::default()
+    };
+    mesh.validate().map_err(|e| Params::invalid("merger", e))?;
+    let transparency = p.f64("transparency")?;
+    if !(0.0..=1.0).contains(&transparency) {
+        return Err(Params::invalid("transparency", format!("{transparency} is not in [0, 1]")));
+    }
+    let dir = p.string("output_dir")?;
+    Ok(Config {
+        cameras,
+        delay_ns: (delay * 1e9) as i64,
+        mesh,
+        transparency: transparency as f32,
+        output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
+        frame_id: p.string("frame_id")?,
+    })
+}
+
+/// The merger component.
+pub struct MergerNode {
+    cfg: Config,
+    clouds: BTreeMap<usize, Arc<PointCloud2>>,
+    scan_id: u32,
+    pending_deadline: Option<i64>,
+    merges: u64,
+    points: u64,
+    triangles: u64,
+    bad_clouds: u64,
+}
+
+impl MergerNode {
+    /// Builds the node from its parameters.
+    pub fn new(p: &Params) -> Result<Self, ParamError> {
+        Ok(Self {
+            cfg: config(p)?,
+            clouds: BTreeMap::new(),
+            scan_id: 0,
+            pending_deadline: None,
+            merges: 0,
+            points: 0,
+            triangles: 0,
+            bad_clouds: 0,
+        })
+    }
+
+    fn grid_of(cloud: &PointCloud2) -> Result<Grid, pointcloud::CloudError> {
+        let pts = pointcloud::read(cloud)?;
+        let (h, w) = (cloud.height as usize, cloud.width as usize);
+        let mut g = Grid::new(h);
+        for c in 0..w {
+            let col =
+                |f: &dyn Fn(&pointcloud::CloudPoint) -> f32| (0..h).map(|r| f(&pts[r * w + c])).collect::<Vec<_>>();
+            let p = xsurf_core::triangulate::Profile {
+                points: (0..h).map(|r| pts[r * w + c].xyz).collect(),
+                intensity: col(&|p| p.intensity.unwrap_or(0.0)),
+                rgb: Some((0..h).map(|r| pts[r * w + c].rgb.unwrap_or(0)).collect()),
+                range: vec![f32::NAN; h],
+            };
+            let _ = g.push(c as i64, &p);
+        }
+        Ok(g)
+    }
+
+    fn merge(&mut self, out: &mut Outbox) {
+        self.pending_deadline = None;
+        if self.clouds.is_empty() {
+            return;
+        }
+        let mut meshes: Vec<(String, Mesh)> = Vec::new();
+        let mut stamp = 0;
+        for (&i, cloud) in &self.clouds {
+            stamp = stamp.max(cloud.header.stamp.nanos());
+            match Self::grid_of(cloud) {
+                Ok(g) => meshes.push((self.cfg.cameras[i].clone(), mesh_grid(&g, &self.cfg.mesh))),
+                Err(e) => {
+                    self.bad_clouds += 1;
+                    log::warn!("merger: /{}/cloud: {e}", self.cfg.cameras[i]);
+                }
+            }
+        }
+        let mut merged = Mesh::default();
+        for (_, m) in &meshes {
+            merged.append(m);
+        }
+        let header = convert::header(stamp, &self.cfg.frame_id);
+        let pts = &merged.positions;
+        let cloud = pointcloud::build(header.clone(), 1, pts.len() as u32, |_, c| {
+            let col = merged.colors.get(c).copied().unwrap_or([200; 3]);
+            (pts[c], 0.0, (u32::from(col[0]) << 16) | (u32::from(col[1]) << 8) | u32::from(col[2]))
+        });
+        self.merges += 1;
+        self.points += pts.len() as u64;
+        self.triangles += merged.triangles.len() as u64;
+        out.publish(0, Msg::Cloud(Arc::new(cloud)));
+        out.publish(
+            1,
+            Msg::Marker(Arc::new(convert::mesh_marker(
+                &merged,
+                header,
+                "surface",
+                self.scan_id as i32,
+                1.0 - self.cfg.transparency,
+            ))),
+        );
+        if let Some(dir) = &self.cfg.output_dir {
+            let dir = dir.join(format!("scan_{}", self.scan_id));
+            if let Err(e) = write_files(&dir, &merged, &meshes, self.cfg.transparency) {
+                log::error!("merger: cannot write files in {}: {e}", dir.display());
+            }
+        }
+        log::info!(
+            "merger: scan {}: {} points, {} triangles from {} camera(s)",
+            self.scan_id,
+            pts.len(),
+            merged.triangles.len(),
+            meshes.len()
+        );
+    }
+}
+
+fn write_files(
+    dir: &std::path::Path,
+    merged: &Mesh,
+    meshes: &[(String, Mesh)],
+    transparency: f32,
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    xsurf_formats::ply::write_file(&dir.join("merged.ply"), merged)?;
+    let scene = Scene {
+        surfaces: meshes.iter().map(|(name, mesh)| Surface { name, mesh, transparency }).collect(),
+        plane: None,
+    };
+    xsurf_formats::vrml::write_file(&dir.join("scene.wrl"), &scene)?;
+    xsurf_formats::gltf::write_file(&dir.join("scene.glb"), &scene)?;
+    Ok(())
+}
+
+impl Component for MergerNode {
+    fn node_name(&self) -> &'static str {
+        "merger"
+    }
+    fn inputs(&self) -> Vec<Port> {
+        let mut v: Vec<Port> = self
+            .cfg
+            .cameras
+            .iter()
+            .map(|c| Port::new(&format!("/{c}/cloud"), PointCloud2::TYPE_NAME, QosClass::Reliable))
+            .collect();
+        v.push(Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable));
+        v
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![
+            Port::new("/surface/cloud", PointCloud2::TYPE_NAME, QosClass::Reliable),
+            Port::new("/surface/mesh", Marker::TYPE_NAME, QosClass::Reliable),
+        ]
+    }
+    fn declarations(&self) -> Vec<ParamDecl> {
+        declarations()
+    }
+    fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
+        let c = config(p)?;
+        if c.cameras != self.cfg.cameras {
+            return Err(Params::invalid("cameras", "cannot change while running (restart the node)"));
+        }
+        self.cfg = c;
+        Ok(())
+    }
+    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+        let n = self.cfg.cameras.len();
+        match (input, msg) {
+            (i, Msg::Cloud(c)) if i < n => {
+                self.clouds.insert(i, c.clone());
+                Ok(())
+            }
+            (i, Msg::ScanEvent(e)) if i == n => {
+                match e.event {
+                    ScanEvent::START => {
+                        if self.pending_deadline.is_some() {
+                            self.merge(out);
+                        }
+                        self.clouds.clear();
+                        self.scan_id = e.scan_id;
+                    }
+                    ScanEvent::END => {
+                        self.scan_id = e.scan_id;
+                        self.pending_deadline = Some(e.header.stamp.nanos() + self.cfg.delay_ns);
+                    }
+                    _ => {
+                        self.pending_deadline = None;
+                        self.clouds.clear();
+                    }
+                }
+                Ok(())
+            }
+            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+        }
+    }
+    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+        if self.pending_deadline.is_some_and(|d| now_ns >= d) {
+            self.merge(out);
+        }
+    }
+    fn finish(&mut self, out: &mut Outbox) {
+        self.merge(out);
+    }
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![
+            ("merges", self.merges),
+            ("points", self.points),
+            ("triangles", self.triangles),
+            ("bad_clouds", self.bad_clouds),
+        ]
+    }
+}

@@ -1,0 +1,369 @@
+//! `mesher`: `profile` -> the organized grid of the scan (`cloud`, published while the scan
+//! runs) and its mesh (`mesh`, at END), plus `<output_dir>/scan_<id>/<cam>.ply`.
+//!
+//! Scans are bounded by `/scan/events` from whoever publishes them; profiles before any START
+//! form scan 0. Gaps in the frame stamps are counted as dropped frames, logged, and kept as
+//! empty grid columns so the mesh does not bridge them (a single missing frame is filled).
+
+use super::decl;
+use crate::convert;
+use std::path::PathBuf;
+use std::sync::Arc;
+use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
+use xsurf_core::triangulate::Profile;
+use xsurf_msgs::sensor_msgs::PointCloud2;
+use xsurf_msgs::visualization_msgs::Marker;
+use xsurf_msgs::xsurf_msgs::ScanEvent;
+use xsurf_msgs::RosMessage;
+use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+
+/// The parameters of `mesher`.
+pub fn declarations() -> Vec<ParamDecl> {
+    let d = MeshConfig::default();
+    vec![
+        decl("max_edge_m", V::Double(d.max_edge_m.into()), "m", "longest triangle edge"),
+        decl(
+            "max_edge_per_m",
+            V::Double(d.max_edge_per_m.into()),
+            "m/m",
+            "extra edge length per metre of camera range (PCL's depth term)",
+        ),
+        decl("min_angle_deg", V::Double(d.min_angle_deg.into()), "deg", "smallest triangle angle (the study used 12)"),
+        decl(
+            "fill_single_holes",
+            V::Bool(d.fill_single_holes),
+            "",
+            "fill isolated single missing points by interpolation",
+        ),
+        decl(
+            "smooth_iterations",
+            V::Integer(d.smooth_iterations.into()),
+            "",
+            "Laplacian smoothing passes (boundary kept)",
+        ),
+        decl("smooth_lambda", V::Double(d.smooth_lambda.into()), "", "Laplacian step, (0, 1]"),
+        decl(
+            "cloud_rate_hz",
+            V::Double(2.0),
+            "Hz",
+            "how often the growing cloud is published during a scan (0: only at END)",
+        ),
+        decl(
+            "output_dir",
+            V::String(String::new()),
+            "",
+            "if set, each scan's mesh is written to <output_dir>/scan_<id>/<camera>.ply",
+        ),
+        decl(
+            "camera",
+            V::String(String::new()),
+            "",
+            "camera name for files and markers (default: the node's namespace)",
+        ),
+        decl("frame_id", V::String("table".into()), "", "frame of the clouds and meshes"),
+        decl(
+            "gap_factor",
+            V::Double(1.5),
+            "",
+            "a stamp gap above this many nominal frame periods counts as dropped frames",
+        ),
+    ]
+}
+
+struct Config {
+    mesh: MeshConfig,
+    cloud_period_ns: Option<i64>,
+    output_dir: Option<PathBuf>,
+    camera: String,
+    frame_id: String,
+    gap_factor: f64,
+}
+
+fn config(p: &Params) -> Result<Config, ParamError> {
+    let smooth = p.i64("smooth_iterations")?;
+    let mesh = MeshConfig {
+        max_edge_m: p.f64("max_edge_m")? as f32,
+        max_edge_per_m: p.f64("max_edge_per_m")? as f32,
+        min_angle_deg: p.f64("min_angle_deg")? as f32,
+        fill_single_holes: p.bool("fill_single_holes")?,
+        smooth_iterations: u32::try_from(smooth)
+            .map_err(|_| Params::invalid("smooth_iterations", format!("{smooth} < 0")))?,
+        smooth_lambda: p.f64("smooth_lambda")? as f32,
+    };
+    mesh.validate().map_err(|e| Params::invalid("mesher", e))?;
+    let rate = p.f64("cloud_rate_hz")?;
+    if !(0.0..=1000.0).contains(&rate) {
+        return Err(Params::invalid("cloud_rate_hz", format!("{rate} is not in [0, 1000]")));
+    }
+    let gap_factor = p.f64("gap_factor")?;
+    if !(gap_factor > 1.0) {
+        return Err(Params::invalid("gap_factor", format!("{gap_factor} must be > 1")));
+    }
+    let dir = p.string("output_dir")?;
+    Ok(Config {
+        mesh,
+        cloud_period_ns: (rate > 0.0).then(|| (1e9 / rate) as i64),
+        output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
+        camera: p.string("camera")?,
+        frame_id: p.string("frame_id")?,
+        gap_factor,
+    })
+}
+
+/// Frame-gap detection from image stamps.
+#[derive(Debug, Default, Clone)]
+struct GapDetector {
+    last_ns: Option<i64>,
+    recent: Vec<i64>,
+}
+
+impl GapDetector {
+    /// Frames missing before a frame at `stamp_ns`.
+    fn missing(&mut self, stamp_ns: i64, factor: f64) -> u32 {
+        let Some(last) = self.last_ns.replace(stamp_ns) else { return 0 };
+        let dt = stamp_ns - last;
+        if dt <= 0 {
+            return 0;
+        }
+        let nominal = if self.recent.len() >= 3 {
+            let mut v = self.recent.clone();
+            v.sort_unstable();
+            Some(v[v.len() / 2])
+        } else {
+            None
+        };
+        match nominal {
+            Some(n) if dt as f64 > factor * n as f64 => {
+                ((dt as f64 / n as f64).round() as u32).saturating_sub(1).max(1)
+            }
+            _ => {
+                self.recent.push(dt);
+                if self.recent.len() > 31 {
+                    self.recent.remove(0);
+                }
+                0
+            }
+        }
+    }
+}
+
+/// The mesher component.
+pub struct MesherNode {
+    cfg: Config,
+    camera: String,
+    scan_id: u32,
+    active: bool,
+    grid: Grid,
+    gaps: GapDetector,
+    last_cloud_ns: i64,
+    scans: u64,
+    frames: u64,
+    dropped_frames: u64,
+    triangles: u64,
+    files_written: u64,
+}
+
+const IN_PROFILE: usize = 0;
+const IN_EVENTS: usize = 1;
+const OUT_CLOUD: usize = 0;
+const OUT_MESH: usize = 1;
+/// Longest run of empty columns inserted for a stamp gap.
+const MAX_GAP_COLUMNS: u32 = 300;
+
+impl MesherNode {
+    /// Builds the node from its parameters.
+    pub fn new(p: &Params) -> Result<Self, ParamError> {
+        let cfg = config(p)?;
+        Ok(Self {
+            camera: cfg.camera.clone(),
+            cfg,
+            scan_id: 0,
+            active: false,
+            grid: Grid::default(),
+            gaps: GapDetector::default(),
+            last_cloud_ns: i64::MIN,
+            scans: 0,
+            frames: 0,
+            dropped_frames: 0,
+            triangles: 0,
+            files_written: 0,
+        })
+    }
+
+    fn start(&mut self, scan_id: u32) {
+        self.scan_id = scan_id;
+        self.active = true;
+        self.grid = Grid::default();
+        self.gaps = GapDetector::default();
+        self.last_cloud_ns = i64::MIN;
+    }
+
+    fn push(&mut self, stamp: i64, p: &Profile) -> Result<(), NodeError> {
+        if self.grid.frames() == 0 {
+            self.grid = Grid::new(p.points.len());
+        }
+        let missing = self.gaps.missing(stamp, self.cfg.gap_factor);
+        if missing > 0 {
+            self.dropped_frames += u64::from(missing);
+            log::warn!(
+                "{}: {missing} frame(s) missing before {} (stamp gap)",
+                self.camera,
+                super::triangulator::fmt_stamp(stamp)
+            );
+            let empty = Profile {
+                points: vec![[f32::NAN; 3]; p.points.len()],
+                intensity: vec![0.0; p.points.len()],
+                rgb: None,
+                range: vec![f32::NAN; p.points.len()],
+            };
+            for _ in 0..missing.min(MAX_GAP_COLUMNS) {
+                let _ = self.grid.push(stamp, &empty);
+            }
+        }
+        self.grid.push(stamp, p).map_err(|n| {
+            NodeError::new(format!("profile has {n} samples, this scan's grid has {}", self.grid.samples()))
+        })?;
+        self.frames += 1;
+        Ok(())
+    }
+
+    fn close(&mut self, aborted: bool, out: &mut Outbox) {
+        if !self.active {
+            return;
+        }
+        self.active = false;
+        self.scans += 1;
+        let stamp = self.grid.stamps_ns().last().copied().unwrap_or(0);
+        let mut grid = self.grid.clone();
+        if self.cfg.mesh.fill_single_holes {
+            grid.fill_single_holes(self.cfg.mesh.max_edge_m);
+        }
+        let mesh = mesh_grid(&grid, &self.cfg.mesh);
+        self.triangles += mesh.triangles.len() as u64;
+        let header = convert::header(stamp, &self.cfg.frame_id);
+        out.publish(OUT_CLOUD, Msg::Cloud(Arc::new(convert::grid_cloud(&grid, header.clone()))));
+        out.publish(
+            OUT_MESH,
+            Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header, &self.camera, self.scan_id as i32, 1.0))),
+        );
+        if let Some(dir) = &self.cfg.output_dir {
+            let dir = dir.join(format!("scan_{}{}", self.scan_id, if aborted { "_aborted" } else { "" }));
+            let path = dir.join(format!("{}.ply", if self.camera.is_empty() { "camera" } else { &self.camera }));
+            let r = std::fs::create_dir_all(&dir)
+                .map_err(|e| e.to_string())
+                .and_then(|_| xsurf_formats::ply::write_file(&path, &mesh).map_err(|e| e.to_string()));
+            match r {
+                Ok(()) => self.files_written += 1,
+                Err(e) => log::error!("{}: cannot write {}: {e}", self.camera, path.display()),
+            }
+        }
+        log::info!(
+            "{}: scan {} {}: {} frames, {} points, {} triangles",
+            self.camera,
+            self.scan_id,
+            if aborted { "aborted" } else { "ended" },
+            grid.frames(),
+            grid.valid(),
+            mesh.triangles.len()
+        );
+    }
+}
+
+impl Component for MesherNode {
+    fn node_name(&self) -> &'static str {
+        "mesher"
+    }
+    fn set_identity(&mut self, _name: &str, namespace: &str) {
+        if self.cfg.camera.is_empty() {
+            self.camera = namespace.trim_matches('/').rsplit('/').next().unwrap_or("").to_string();
+        }
+    }
+    fn inputs(&self) -> Vec<Port> {
+        vec![
+            Port::new("profile", PointCloud2::TYPE_NAME, QosClass::Reliable),
+            Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
+        ]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![
+            Port::new("cloud", PointCloud2::TYPE_NAME, QosClass::Reliable),
+            Port::new("mesh", Marker::TYPE_NAME, QosClass::Reliable),
+        ]
+    }
+    fn declarations(&self) -> Vec<ParamDecl> {
+        declarations()
+    }
+    fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
+        self.cfg = config(p)?;
+        if !self.cfg.camera.is_empty() {
+            self.camera = self.cfg.camera.clone();
+        }
+        Ok(())
+    }
+    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+        match (input, msg) {
+            (IN_PROFILE, Msg::Cloud(c)) => {
+                let p = convert::cloud_profile(c).map_err(|e| NodeError::new(format!("profile: {e}")))?;
+                if !self.active {
+                    self.start(0);
+                }
+                let stamp = c.header.stamp.nanos();
+                self.push(stamp, &p)?;
+                if let Some(period) = self.cfg.cloud_period_ns {
+                    if stamp.saturating_sub(self.last_cloud_ns) >= period {
+                        self.last_cloud_ns = stamp;
+                        let h = convert::header(stamp, &self.cfg.frame_id);
+                        out.publish(OUT_CLOUD, Msg::Cloud(Arc::new(convert::grid_cloud(&self.grid, h))));
+                    }
+                }
+                Ok(())
+            }
+            (IN_EVENTS, Msg::ScanEvent(e)) => {
+                match e.event {
+                    ScanEvent::START => {
+                        self.close(false, out);
+                        self.start(e.scan_id);
+                    }
+                    ScanEvent::END if self.active => self.close(false, out),
+                    ScanEvent::ABORT if self.active => self.close(true, out),
+                    ScanEvent::END | ScanEvent::ABORT => {}
+                    other => return Err(NodeError::new(format!("unknown scan event {other}"))),
+                }
+                Ok(())
+            }
+            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+        }
+    }
+    fn finish(&mut self, out: &mut Outbox) {
+        self.close(false, out);
+    }
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![
+            ("scans", self.scans),
+            ("frames", self.frames),
+            ("dropped_frames", self.dropped_frames),
+            ("triangles", self.triangles),
+            ("files_written", self.files_written),
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gaps_counted_from_stamps() {
+        let mut g = GapDetector::default();
+        let mut missing = 0;
+        for (i, t) in [0, 33, 66, 100, 133, 233, 266].iter().enumerate() {
+            let m = g.missing(*t * 1_000_000, 1.5);
+            if i == 5 {
+                assert_eq!(m, 2);
+            }
+            missing += m;
+        }
+        assert_eq!(missing, 2);
+    }
+}

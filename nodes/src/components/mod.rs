@@ -1,0 +1,49 @@
+//! The nodes' logic as components (see `xsurf_runtime::component`). Each has `new(&Params)`,
+//! declares its parameters with defaults, units and meanings, and is documented in
+//! `nodes/README.md`.
+
+pub mod edge_detector;
+pub mod merger;
+pub mod mesher;
+pub mod triangulator;
+
+use xsurf_runtime::component::Component;
+use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue, Params};
+
+/// A parameter declaration.
+pub(crate) fn decl(
+    name: &'static str,
+    default: ParamValue,
+    unit: &'static str,
+    description: &'static str,
+) -> ParamDecl {
+    ParamDecl { name, default, unit, description }
+}
+
+/// The node names of the spec, in pipeline order.
+pub const NODE_NAMES: [&str; 7] =
+    ["camera_driver", "c_arm_pose", "edge_detector", "triangulator", "mesher", "merger", "xray_aligner"];
+
+/// The declarations of a node by name (for docs and `ros2 param` services).
+pub fn declarations(node: &str) -> Option<Vec<ParamDecl>> {
+    Some(match node {
+        "edge_detector" => edge_detector::declarations(),
+        "triangulator" => triangulator::declarations(),
+        "mesher" => mesher::declarations(),
+        "merger" => merger::declarations(),
+        _ => return None,
+    })
+}
+
+/// Builds a component by node name from its resolved parameters.
+pub fn build(node: &str, params: &Params) -> Result<Box<dyn Component>, ParamError> {
+    Ok(match node {
+        "edge_detector" => Box::new(edge_detector::EdgeDetectorNode::new(params)?),
+        "triangulator" => Box::new(triangulator::TriangulatorNode::new(params)?),
+        "mesher" => Box::new(mesher::MesherNode::new(params)?),
+        "merger" => Box::new(merger::MergerNode::new(params)?),
+        other => {
+            return Err(ParamError::Invalid { name: "node".into(), reason: format!("no component named {other}") })
+        }
+    })
+}

@@ -1,0 +1,265 @@
+//! `triangulator`: `laser_line` + `camera_info` + `/tf` + `/tf_static` -> `profile`.
+//!
+//! A line waits (bounded) until `table -> carm` is known at its stamp, so tf arriving a little
+//! after the image is fine; a line that cannot be placed is counted and reported.
+
+use super::decl;
+use crate::convert;
+use crate::tf::TfBuffer;
+use std::collections::VecDeque;
+use std::sync::Arc;
+use xsurf_core::camera::CameraModel;
+use xsurf_core::triangulate::{CameraGeometry, Profile, Triangulator, TriangulatorConfig};
+use xsurf_msgs::sensor_msgs::{CameraInfo, PointCloud2};
+use xsurf_msgs::tf2_msgs::TFMessage;
+use xsurf_msgs::xsurf_msgs::{LaserLine, ScanEvent};
+use xsurf_msgs::RosMessage;
+use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+
+/// The parameters of `triangulator`.
+pub fn declarations() -> Vec<ParamDecl> {
+    vec![
+        decl(
+            "laser_plane",
+            V::DoubleArray(vec![0.0, 1.0, 0.0, 0.0]),
+            "m",
+            "the laser plane in carm, [nx, ny, nz, d]: {p : n.p = d}",
+        ),
+        decl(
+            "min_ray_plane_angle_deg",
+            V::Double(10.0),
+            "deg",
+            "camera rays meeting the plane at a smaller angle are rejected",
+        ),
+        decl("min_strength", V::Double(0.0), "grey levels", "line samples weaker than this are dropped"),
+        decl("table_frame", V::String("table".into()), "", "the fixed frame points are placed in"),
+        decl("carm_frame", V::String("carm".into()), "", "the C-arm frame the laser plane is given in"),
+        decl(
+            "max_pose_gap_s",
+            V::Double(0.5),
+            "s",
+            "largest gap between table -> carm samples that is interpolated across",
+        ),
+        decl(
+            "max_pending",
+            V::Integer(120),
+            "lines",
+            "lines held while waiting for their pose; beyond this the oldest is placed or dropped",
+        ),
+    ]
+}
+
+struct Config {
+    tri: TriangulatorConfig,
+    table_frame: String,
+    carm_frame: String,
+    max_gap_ns: i64,
+    max_pending: usize,
+}
+
+fn config(p: &Params) -> Result<Config, ParamError> {
+    let plane = p.f64_array("laser_plane")?;
+    let plane: [f64; 4] = plane
+        .as_slice()
+        .try_into()
+        .map_err(|_| Params::invalid("laser_plane", format!("needs 4 values, got {}", plane.len())))?;
+    if xsurf_core::geom::Plane::from_params(plane).is_none() {
+        return Err(Params::invalid("laser_plane", format!("{plane:?} has a zero or non-finite normal")));
+    }
+    let angle = p.f64("min_ray_plane_angle_deg")?;
+    if !(0.0..90.0).contains(&angle) {
+        return Err(Params::invalid("min_ray_plane_angle_deg", format!("{angle} is not in [0, 90)")));
+    }
+    let gap = p.f64("max_pose_gap_s")?;
+    if !(gap > 0.0 && gap < 3600.0) {
+        return Err(Params::invalid("max_pose_gap_s", format!("{gap} is not in (0, 3600)")));
+    }
+    let pending = p.i64("max_pending")?;
+    if !(1..=100_000).contains(&pending) {
+        return Err(Params::invalid("max_pending", format!("{pending} is not in 1..=100000")));
+    }
+    Ok(Config {
+        tri: TriangulatorConfig {
+            laser_plane: plane,
+            min_ray_plane_angle_deg: angle,
+            min_strength: p.f64("min_strength")? as f32,
+        },
+        table_frame: p.string("table_frame")?,
+        carm_frame: p.string("carm_frame")?,
+        max_gap_ns: (gap * 1e9) as i64,
+        max_pending: pending as usize,
+    })
+}
+
+/// The triangulator component.
+pub struct TriangulatorNode {
+    cfg: Config,
+    tf: TfBuffer,
+    model: Option<(CameraModel, String)>,
+    tri: Option<(Triangulator, String, CameraModel)>,
+    pending: VecDeque<Arc<LaserLine>>,
+    profile: Profile,
+    lines: u64,
+    profiles: u64,
+    points: u64,
+    unplaced: u64,
+}
+
+const IN_LINE: usize = 0;
+const IN_INFO: usize = 1;
+const IN_TF: usize = 2;
+const IN_TF_STATIC: usize = 3;
+const IN_EVENTS: usize = 4;
+
+impl TriangulatorNode {
+    /// Builds the node from its parameters.
+    pub fn new(p: &Params) -> Result<Self, ParamError> {
+        let cfg = config(p)?;
+        let tf = TfBuffer::new(&cfg.table_frame, &cfg.carm_frame, cfg.max_gap_ns);
+        Ok(Self {
+            cfg,
+            tf,
+            model: None,
+            tri: None,
+            pending: VecDeque::new(),
+            profile: Profile::default(),
+            lines: 0,
+            profiles: 0,
+            points: 0,
+            unplaced: 0,
+        })
+    }
+
+    /// Makes sure the triangulator for `frame` is built.
+    fn ensure_triangulator(&mut self, frame: &str) -> Result<(), NodeError> {
+        let (model, info_frame) = self.model.clone().ok_or_else(|| NodeError::new("no camera_info received yet"))?;
+        let rebuild = match &self.tri {
+            Some((_, f, m)) => f != frame || *m != model,
+            None => true,
+        };
+        if rebuild {
+            let carm_from_optical = self.tf.carm_from(frame).ok_or_else(|| {
+                NodeError::new(format!(
+                    "no tf from {} to {frame} on /tf_static (camera_info frame {info_frame})",
+                    self.cfg.carm_frame
+                ))
+            })?;
+            let t = Triangulator::new(CameraGeometry { model, carm_from_optical }, &self.cfg.tri)
+                .map_err(NodeError::new)?;
+            self.tri = Some((t, frame.to_string(), model));
+        }
+        Ok(())
+    }
+
+    /// Places the oldest pending line; `force` places it even if its pose is not bracketed yet.
+    fn drain(&mut self, out: &mut Outbox, force: bool) -> Result<(), NodeError> {
+        while let Some(line) = self.pending.front().cloned() {
+            let stamp = line.header.stamp.nanos();
+            let ready = self.model.is_some() && self.tf.latest_pose_stamp().is_some_and(|l| l >= stamp);
+            if !ready && !force && self.pending.len() <= self.cfg.max_pending {
+                return Ok(());
+            }
+            self.pending.pop_front();
+            let pose = match self.tf.table_from_carm(stamp) {
+                Ok(p) => p,
+                Err(e) => {
+                    self.unplaced += 1;
+                    return Err(NodeError::new(format!("laser_line at {}: {e}", fmt_stamp(stamp))));
+                }
+            };
+            let core = convert::core_line(&line).map_err(NodeError::new)?;
+            let frame = line.header.frame_id.trim_start_matches('/').to_string();
+            if let Err(e) = self.ensure_triangulator(&frame) {
+                self.unplaced += 1;
+                return Err(e);
+            }
+            let Some((tri, _, _)) = self.tri.as_ref() else { return Err(NodeError::new("no triangulator")) };
+            tri.triangulate(&core, &pose, &mut self.profile);
+            self.profiles += 1;
+            self.points += self.profile.valid() as u64;
+            let cloud: PointCloud2 =
+                convert::profile_cloud(&self.profile, convert::header(stamp, &self.cfg.table_frame));
+            out.publish(0, Msg::Cloud(Arc::new(cloud)));
+        }
+        Ok(())
+    }
+}
+
+/// `sec.nanosec` for messages.
+pub fn fmt_stamp(ns: i64) -> String {
+    format!("{}.{:09}", ns.div_euclid(1_000_000_000), ns.rem_euclid(1_000_000_000))
+}
+
+impl Component for TriangulatorNode {
+    fn node_name(&self) -> &'static str {
+        "triangulator"
+    }
+    fn inputs(&self) -> Vec<Port> {
+        vec![
+            Port::new("laser_line", LaserLine::TYPE_NAME, QosClass::Reliable),
+            Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
+            Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable),
+            Port::new("/tf_static", TFMessage::TYPE_NAME, QosClass::Static),
+            Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
+        ]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("profile", PointCloud2::TYPE_NAME, QosClass::Reliable)]
+    }
+    fn declarations(&self) -> Vec<ParamDecl> {
+        declarations()
+    }
+    fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
+        self.cfg = config(p)?;
+        self.tri = None;
+        Ok(())
+    }
+    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+        match (input, msg) {
+            (IN_LINE, Msg::LaserLine(l)) => {
+                self.lines += 1;
+                self.pending.push_back(l.clone());
+                self.drain(out, false)
+            }
+            (IN_INFO, Msg::CameraInfo(i)) => {
+                let m = convert::camera_model(i).map_err(|e| NodeError::new(format!("camera_info: {e}")))?;
+                self.model = Some((m, i.header.frame_id.clone()));
+                self.drain(out, false)
+            }
+            (IN_TF, Msg::Tf(t)) => {
+                self.tf.add_dynamic(t);
+                self.drain(out, false)
+            }
+            (IN_TF_STATIC, Msg::Tf(t)) => {
+                self.tf.add_static(t);
+                self.tri = None;
+                Ok(())
+            }
+            (IN_EVENTS, Msg::ScanEvent(e)) => {
+                // At the end of a scan the lines still waiting for a pose are placed now, so the
+                // mesher has them before it closes the scan.
+                if e.event != ScanEvent::START {
+                    return self.drain(out, true);
+                }
+                Ok(())
+            }
+            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+        }
+    }
+    fn finish(&mut self, out: &mut Outbox) {
+        while !self.pending.is_empty() {
+            if let Err(e) = self.drain(out, true) {
+                log::warn!("triangulator: {e}");
+            }
+        }
+    }
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![
+            ("lines", self.lines),
+            ("profiles", self.profiles),
+            ("points", self.points),
+            ("unplaced_lines", self.unplaced),
+        ]
+    }
+}

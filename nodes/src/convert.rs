@@ -1,0 +1,225 @@
+//! Conversions between messages and the algorithms' types.
+
+use xsurf_core::camera::{CameraError, CameraModel, Distortion};
+use xsurf_core::edge::{LaserLine as CoreLine, Orientation};
+use xsurf_core::geom::{Iso3, Quat, Vec3};
+use xsurf_core::mesh::{Grid, Mesh};
+use xsurf_core::triangulate::Profile;
+use xsurf_msgs::builtin_interfaces::Time;
+use xsurf_msgs::geometry_msgs::{Point, Quaternion, Transform, TransformStamped, Vector3};
+use xsurf_msgs::pointcloud;
+use xsurf_msgs::sensor_msgs::{CameraInfo, PointCloud2};
+use xsurf_msgs::std_msgs::{ColorRGBA, Header};
+use xsurf_msgs::visualization_msgs::Marker;
+use xsurf_msgs::xsurf_msgs::LaserLine;
+
+/// A header.
+pub fn header(stamp_ns: i64, frame_id: &str) -> Header {
+    Header { stamp: Time::from_nanos(stamp_ns), frame_id: frame_id.to_string() }
+}
+
+/// Intrinsics from a `CameraInfo` (binning and ROI are not handled and are refused).
+pub fn camera_model(info: &CameraInfo) -> Result<CameraModel, CameraError> {
+    if info.binning_x > 1 || info.binning_y > 1 || info.roi.width != 0 {
+        return Err(CameraError::InvalidIntrinsics("binning and ROI in camera_info are not supported".into()));
+    }
+    let m = CameraModel {
+        width: info.width,
+        height: info.height,
+        fx: info.k[0],
+        fy: info.k[4],
+        cx: info.k[2],
+        cy: info.k[5],
+        distortion: Distortion::from_ros(&info.distortion_model, &info.d)?,
+    };
+    m.validate()?;
+    Ok(m)
+}
+
+/// A `CameraInfo` for intrinsics (no rectification: R = I, P = [K | 0]).
+pub fn camera_info(model: &CameraModel, header: Header) -> CameraInfo {
+    let (dm, d) = model.distortion.to_ros();
+    let k = model.k();
+    CameraInfo {
+        header,
+        height: model.height,
+        width: model.width,
+        distortion_model: dm.to_string(),
+        d,
+        k,
+        r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        p: [k[0], 0.0, k[2], 0.0, 0.0, k[4], k[5], 0.0, 0.0, 0.0, 1.0, 0.0],
+        ..Default::default()
+    }
+}
+
+/// A transform message's pose.
+pub fn iso(t: &Transform) -> Iso3 {
+    let r = t.rotation;
+    Iso3::from_parts(
+        Vec3::new(t.translation.x, t.translation.y, t.translation.z),
+        Quat { x: r.x, y: r.y, z: r.z, w: r.w },
+    )
+}
+
+/// A pose as a stamped transform `parent -> child`.
+pub fn transform_stamped(stamp_ns: i64, parent: &str, child: &str, t: &Iso3) -> TransformStamped {
+    let q = t.quaternion();
+    TransformStamped {
+        header: header(stamp_ns, parent),
+        child_frame_id: child.to_string(),
+        transform: Transform {
+            translation: Vector3 { x: t.translation.x, y: t.translation.y, z: t.translation.z },
+            rotation: Quaternion { x: q.x, y: q.y, z: q.z, w: q.w },
+        },
+    }
+}
+
+/// The message form of a detected line.
+pub fn line_msg(line: &CoreLine, header: Header) -> LaserLine {
+    LaserLine {
+        header,
+        image_width: line.image_width,
+        image_height: line.image_height,
+        orientation: match line.orientation {
+            Orientation::Vertical => LaserLine::ORIENTATION_VERTICAL,
+            Orientation::Horizontal => LaserLine::ORIENTATION_HORIZONTAL,
+        },
+        u: line.u.clone(),
+        v: line.v.clone(),
+        strength: line.strength.clone(),
+        width: line.width.clone(),
+        rgb: line.rgb.clone(),
+    }
+}
+
+/// Why a `LaserLine` message cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "LaserLine arrays disagree: u {u}, v {v}, strength {strength}, width {width}, rgb {rgb} (expected rgb 0 or 3 x u)"
+)]
+pub struct LineShapeError {
+    u: usize,
+    v: usize,
+    strength: usize,
+    width: usize,
+    rgb: usize,
+}
+
+/// The algorithm form of a line message, checking that its arrays agree.
+pub fn core_line(m: &LaserLine) -> Result<CoreLine, LineShapeError> {
+    let n = m.u.len();
+    if m.v.len() != n || m.strength.len() != n || m.width.len() != n || !(m.rgb.is_empty() || m.rgb.len() == 3 * n) {
+        return Err(LineShapeError {
+            u: n,
+            v: m.v.len(),
+            strength: m.strength.len(),
+            width: m.width.len(),
+            rgb: m.rgb.len(),
+        });
+    }
+    Ok(CoreLine {
+        orientation: if m.orientation == LaserLine::ORIENTATION_HORIZONTAL {
+            Orientation::Horizontal
+        } else {
+            Orientation::Vertical
+        },
+        image_width: m.image_width,
+        image_height: m.image_height,
+        u: m.u.clone(),
+        v: m.v.clone(),
+        strength: m.strength.clone(),
+        width: m.width.clone(),
+        rgb: m.rgb.clone(),
+    })
+}
+
+/// A one-frame profile as an organized cloud (height = samples, width 1).
+pub fn profile_cloud(p: &Profile, header: Header) -> PointCloud2 {
+    pointcloud::build(header, p.points.len() as u32, 1, |r, _| {
+        (p.points[r], p.intensity[r], p.rgb.as_ref().map_or(0, |c| c[r]))
+    })
+}
+
+/// A profile from a one-frame cloud (the mesher's input). Range is not carried: NaN.
+pub fn cloud_profile(c: &PointCloud2) -> Result<Profile, pointcloud::CloudError> {
+    let pts = pointcloud::read(c)?;
+    let has_rgb = pts.iter().any(|p| p.rgb.is_some_and(|v| v != 0));
+    Ok(Profile {
+        points: pts.iter().map(|p| p.xyz).collect(),
+        intensity: pts.iter().map(|p| p.intensity.unwrap_or(0.0)).collect(),
+        rgb: has_rgb.then(|| pts.iter().map(|p| p.rgb.unwrap_or(0)).collect()),
+        range: vec![f32::NAN; pts.len()],
+    })
+}
+
+/// The organized grid so far: height = samples per frame, width = frames.
+pub fn grid_cloud(g: &Grid, header: Header) -> PointCloud2 {
+    let ns = g.samples();
+    pointcloud::build(header, ns as u32, g.frames() as u32, |r, c| {
+        let i = c * ns + r;
+        (g.points()[i], g.intensity()[i], g.rgb()[i])
+    })
+}
+
+/// A mesh as an rviz2 `TRIANGLE_LIST` marker with per-vertex colours.
+pub fn mesh_marker(mesh: &Mesh, header: Header, ns: &str, id: i32, alpha: f32) -> Marker {
+    let mut points = Vec::with_capacity(mesh.triangles.len() * 3);
+    let mut colors = Vec::with_capacity(mesh.triangles.len() * 3);
+    for t in &mesh.triangles {
+        for &i in t {
+            let p = mesh.positions[i as usize];
+            points.push(Point { x: p[0].into(), y: p[1].into(), z: p[2].into() });
+            let c = mesh.colors.get(i as usize).copied().unwrap_or([200, 200, 200]);
+            colors.push(ColorRGBA {
+                r: f32::from(c[0]) / 255.0,
+                g: f32::from(c[1]) / 255.0,
+                b: f32::from(c[2]) / 255.0,
+                a: alpha,
+            });
+        }
+    }
+    Marker {
+        header,
+        ns: ns.to_string(),
+        id,
+        type_: Marker::TRIANGLE_LIST,
+        action: Marker::ADD,
+        pose: Default::default(),
+        scale: Vector3 { x: 1.0, y: 1.0, z: 1.0 },
+        color: ColorRGBA { r: 0.8, g: 0.8, b: 0.8, a: alpha },
+        points,
+        colors,
+        ..Default::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn camera_info_round_trip() {
+        let rig = xsurf_core::rig::Rig::study(640, 480);
+        let m = rig.cameras[0].model().unwrap();
+        let info = camera_info(&m, Header::default());
+        assert_eq!(camera_model(&info).unwrap(), m);
+        let mut bad = info.clone();
+        bad.distortion_model = "fisheye".into();
+        assert!(camera_model(&bad).is_err());
+    }
+
+    #[test]
+    fn transform_round_trip() {
+        let t = Iso3::look_at(Vec3::new(0.1, 0.2, 0.8), Vec3::ZERO, Vec3::X).unwrap();
+        let back = iso(&transform_stamped(0, "carm", "cam1_optical_frame", &t).transform);
+        let p = Vec3::new(0.3, -0.2, 0.5);
+        assert!((back.transform_point(p) - t.transform_point(p)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn inconsistent_line_is_refused() {
+        let m = LaserLine { u: vec![1.0], v: vec![], ..Default::default() };
+        assert!(core_line(&m).is_err());
+    }
+}

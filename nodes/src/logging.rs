@@ -1,0 +1,41 @@
+//! A small `log` backend: `[LEVEL] [logger]: message` on stderr, with a global level and
+//! per-logger levels (the ROS 2 `--log-level` forms). RustDDS' per-datagram warnings are
+//! quiet unless asked for.
+
+use std::sync::OnceLock;
+
+struct Logger {
+    level: log::LevelFilter,
+    per: Vec<(String, log::LevelFilter)>,
+}
+
+static LOGGER: OnceLock<Logger> = OnceLock::new();
+
+impl log::Log for Logger {
+    fn enabled(&self, m: &log::Metadata<'_>) -> bool {
+        let target = m.target();
+        let level = self
+            .per
+            .iter()
+            .filter(|(name, _)| target.starts_with(name.as_str()))
+            .max_by_key(|(name, _)| name.len())
+            .map(|(_, l)| *l)
+            .unwrap_or(if target.starts_with("rustdds") { log::LevelFilter::Error } else { self.level });
+        m.level() <= level
+    }
+    fn log(&self, r: &log::Record<'_>) {
+        if self.enabled(r.metadata()) {
+            eprintln!("[{}] [{}]: {}", r.level(), r.target(), r.args());
+        }
+    }
+    fn flush(&self) {}
+}
+
+/// Installs the logger (once; later calls are ignored).
+pub fn init(level: log::LevelFilter, per_logger: Vec<(String, log::LevelFilter)>) {
+    let max = per_logger.iter().map(|p| p.1).chain([level]).max().unwrap_or(level);
+    let l = LOGGER.get_or_init(|| Logger { level, per: per_logger });
+    if log::set_logger(l).is_ok() {
+        log::set_max_level(max);
+    }
+}

@@ -1,0 +1,367 @@
+//! `xsurf reconstruct BAG --out DIR`: the live graph's components driven from a bag.
+//!
+//! The cameras are the namespaces of the bag's `/<cam>/image_raw` topics. Each camera gets
+//! `edge_detector`, `triangulator` and `mesher` in its namespace and one `merger` takes them
+//! all, with parameters resolved exactly as for the live nodes `/<cam>/<node>` (`--params-file`
+//! in the ROS 2 format). The meshers and the merger write the files; a bag with one scan has
+//! them in `DIR`, several scans in `DIR/scan_<id>/`.
+
+use crate::components;
+use anyhow::{bail, Context};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use xsurf_formats::bag::Bag;
+use xsurf_runtime::component::Msg;
+use xsurf_runtime::params::{ParamValue, Params};
+use xsurf_runtime::rosargs::{fq_name, RosArgs};
+use xsurf_runtime::router::Router;
+
+/// Options of a reconstruction.
+#[derive(Debug, Clone, Default)]
+pub struct Options {
+    /// The bag directory.
+    pub bag: PathBuf,
+    /// A ROS 2 params file.
+    pub params_file: Option<PathBuf>,
+    /// Output directory.
+    pub out: PathBuf,
+    /// Progress on stderr.
+    pub progress: bool,
+}
+
+/// Per-node figures in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct NodeReport {
+    /// Fully qualified node name.
+    pub node: String,
+    /// Messages handled.
+    pub messages: u64,
+    /// Messages refused (bad input).
+    pub errors: u64,
+    /// Time in the node, seconds.
+    pub seconds: f64,
+    /// The node's own counters.
+    pub counters: BTreeMap<String, u64>,
+}
+
+/// What `report.json` holds.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    /// The bag read.
+    pub bag: String,
+    /// Cameras found.
+    pub cameras: Vec<String>,
+    /// Messages read from the bag.
+    pub messages_read: u64,
+    /// Images read per camera.
+    pub frames_read: BTreeMap<String, u64>,
+    /// Images in which a line was found, per camera.
+    pub frames_with_line: BTreeMap<String, u64>,
+    /// Points per camera (all scans).
+    pub points: BTreeMap<String, u64>,
+    /// Triangles per camera (all scans).
+    pub triangles: BTreeMap<String, u64>,
+    /// Merged surface: points and triangles (all scans).
+    pub merged_points: u64,
+    /// Merged surface triangles.
+    pub merged_triangles: u64,
+    /// Scans reconstructed.
+    pub scans: Vec<u32>,
+    /// Frames missing from the stamp sequence, per camera.
+    pub dropped_frames: BTreeMap<String, u64>,
+    /// Seconds per stage (all cameras), and in total.
+    pub timings_s: BTreeMap<String, f64>,
+    /// Frames per second over the whole run (all cameras).
+    pub frames_per_second: f64,
+    /// Peak resident memory, bytes (VmHWM).
+    pub peak_rss_bytes: Option<u64>,
+    /// Set when the bag ended early (a truncated or corrupt file): what and where.
+    pub truncated: Option<String>,
+    /// Messages that could not be decoded, per topic.
+    pub undecodable: BTreeMap<String, u64>,
+    /// Topics in the bag that the reconstruction does not use.
+    pub unused_topics: Vec<String>,
+    /// Per-node details.
+    pub nodes: Vec<NodeReport>,
+    /// Files written, relative to the output directory.
+    pub files: Vec<String>,
+}
+
+/// Peak resident set size of this process (Linux), bytes.
+pub fn peak_rss_bytes() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+const USED_TYPES: &[(&str, &str)] =
+    &[("image_raw", "sensor_msgs/msg/Image"), ("camera_info", "sensor_msgs/msg/CameraInfo")];
+
+/// Runs the reconstruction and writes the files and `report.json`.
+pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
+    let t_start = Instant::now();
+    let bag = Bag::open(&opts.bag)?;
+    let meta = &bag.metadata;
+    let topic_type: BTreeMap<&str, &str> =
+        meta.topics.iter().map(|t| (t.name.as_str(), t.type_name.as_str())).collect();
+    // Cameras: namespaces of /<cam>/image_raw.
+    let mut cameras = Vec::new();
+    for t in &meta.topics {
+        if let Some(ns) = t.name.strip_suffix("/image_raw") {
+            let cam = ns.trim_start_matches('/');
+            if cam.is_empty() || cam.contains('/') {
+                bail!("topic {}: expected /<camera>/image_raw", t.name);
+            }
+            if t.type_name != "sensor_msgs/msg/Image" {
+                bail!(
+                    "topic {} has type {}, expected sensor_msgs/msg/Image (compressed images are not handled)",
+                    t.name,
+                    t.type_name
+                );
+            }
+            cameras.push(cam.to_string());
+        }
+    }
+    if cameras.is_empty() {
+        bail!(
+            "{}: no /<camera>/image_raw topic in the bag (topics: {})",
+            opts.bag.display(),
+            meta.topics.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ")
+        );
+    }
+    for cam in &cameras {
+        for (suffix, ty) in USED_TYPES {
+            let topic = format!("/{cam}/{suffix}");
+            match topic_type.get(topic.as_str()) {
+                None => bail!("no {topic} in the bag: camera {cam} cannot be triangulated without its intrinsics"),
+                Some(t) if t != ty => bail!("topic {topic} has type {t}, expected {ty}"),
+                _ => {}
+            }
+        }
+    }
+    for (topic, ty) in [("/tf", "tf2_msgs/msg/TFMessage"), ("/tf_static", "tf2_msgs/msg/TFMessage")] {
+        match topic_type.get(topic) {
+            None => bail!(
+                "no {topic} in the bag: the frames cannot be placed (table -> carm and carm -> camera are needed)"
+            ),
+            Some(t) if *t != ty => bail!("topic {topic} has type {t}, expected {ty}"),
+            _ => {}
+        }
+    }
+    if let Some(t) = topic_type.get("/scan/events") {
+        if *t != "xsurf_msgs/msg/ScanEvent" {
+            bail!("topic /scan/events has type {t}, expected xsurf_msgs/msg/ScanEvent");
+        }
+    }
+
+    std::fs::create_dir_all(&opts.out).with_context(|| format!("cannot create {}", opts.out.display()))?;
+    let mut args: Vec<String> = vec!["--ros-args".into()];
+    if let Some(f) = &opts.params_file {
+        if !f.is_file() {
+            bail!("params file {} does not exist", f.display());
+        }
+        args.extend(["--params-file".into(), f.to_string_lossy().into_owned()]);
+    }
+    let ros = RosArgs::parse(&args)?;
+    let out_dir = opts.out.to_string_lossy().into_owned();
+    let mut router = Router::new();
+    let build = |node: &str,
+                 ns: &str,
+                 extra: &[(&str, ParamValue)]|
+     -> anyhow::Result<Box<dyn xsurf_runtime::component::Component>> {
+        let fq = fq_name(ns, node);
+        let mut overrides = ros.param_overrides(&fq)?;
+        for (k, v) in extra {
+            overrides.insert(k.to_string(), v.clone());
+        }
+        let decls = components::declarations(node).unwrap_or_default();
+        let params = Params::resolve(&decls, &overrides).with_context(|| format!("node {fq}"))?;
+        components::build(node, &params).with_context(|| format!("node {fq}"))
+    };
+    for cam in &cameras {
+        let ns = format!("/{cam}");
+        for node in ["edge_detector", "triangulator"] {
+            router.add(build(node, &ns, &[])?, node, &ns, &ros.remaps);
+        }
+        router.add(
+            build("mesher", &ns, &[("output_dir", ParamValue::String(out_dir.clone()))])?,
+            "mesher",
+            &ns,
+            &ros.remaps,
+        );
+    }
+    let cams_param = ParamValue::StringArray(cameras.clone());
+    router.add(
+        build("merger", "/", &[("output_dir", ParamValue::String(out_dir.clone())), ("cameras", cams_param)])?,
+        "merger",
+        "/",
+        &ros.remaps,
+    );
+
+    let mut report = Report {
+        bag: opts.bag.display().to_string(),
+        cameras: cameras.clone(),
+        messages_read: 0,
+        frames_read: BTreeMap::new(),
+        frames_with_line: BTreeMap::new(),
+        points: BTreeMap::new(),
+        triangles: BTreeMap::new(),
+        merged_points: 0,
+        merged_triangles: 0,
+        scans: Vec::new(),
+        dropped_frames: BTreeMap::new(),
+        timings_s: BTreeMap::new(),
+        frames_per_second: 0.0,
+        peak_rss_bytes: None,
+        truncated: None,
+        undecodable: BTreeMap::new(),
+        unused_topics: meta.topics.iter().filter(|t| !router.has_subscriber(&t.name)).map(|t| t.name.clone()).collect(),
+        nodes: Vec::new(),
+        files: Vec::new(),
+    };
+    let total_images: u64 = cameras
+        .iter()
+        .map(|c| meta.topics.iter().find(|t| t.name == format!("/{c}/image_raw")).map_or(0, |t| t.message_count))
+        .sum();
+    let tty = opts.progress && std::io::stderr().is_terminal();
+    let mut images = 0u64;
+    let mut last_report = Instant::now();
+    let t_read = Instant::now();
+    let mut read_s = 0.0;
+    for m in bag.messages() {
+        let m = match m {
+            Ok(m) => m,
+            Err(e) => {
+                log::error!("{e}; reconstructing what was read before it");
+                report.truncated = Some(e.to_string());
+                break;
+            }
+        };
+        report.messages_read += 1;
+        if !router.has_subscriber(&m.topic) {
+            continue;
+        }
+        let t_dec = Instant::now();
+        let msg = match Msg::decode(&m.type_name, &m.data) {
+            Ok(msg) => msg,
+            Err(e) => {
+                *report.undecodable.entry(m.topic.clone()).or_default() += 1;
+                log::warn!("{} at {}: {e}", m.topic, crate::components::triangulator::fmt_stamp(m.log_time_ns as i64));
+                continue;
+            }
+        };
+        read_s += t_dec.elapsed().as_secs_f64();
+        if let Some(cam) = m.topic.strip_suffix("/image_raw") {
+            images += 1;
+            *report.frames_read.entry(cam.trim_start_matches('/').to_string()).or_default() += 1;
+        }
+        router.publish(&m.topic, &msg);
+        router.tick(m.log_time_ns as i64);
+        if opts.progress && (last_report.elapsed().as_secs_f64() > if tty { 0.2 } else { 2.0 }) {
+            last_report = Instant::now();
+            let fps = images as f64 / t_read.elapsed().as_secs_f64().max(1e-9);
+            if tty {
+                let w = 30usize;
+                let done = ((images as f64 / total_images.max(1) as f64) * w as f64) as usize;
+                eprint!(
+                    "\r[{}{}] {images}/{total_images} frames, {fps:.0} frames/s ",
+                    "#".repeat(done.min(w)),
+                    " ".repeat(w - done.min(w))
+                );
+            } else {
+                eprintln!("reconstruct: {images}/{total_images} frames, {fps:.0} frames/s");
+            }
+        }
+    }
+    router.finish();
+    if tty {
+        eprintln!();
+    }
+
+    // Figures.
+    let mut stage = BTreeMap::<String, f64>::new();
+    for n in router.nodes() {
+        let counters: BTreeMap<String, u64> =
+            n.component.counters().into_iter().map(|(k, v)| (k.to_string(), v)).collect();
+        let cam = n.namespace.trim_start_matches('/').to_string();
+        let get = |k: &str| counters.get(k).copied().unwrap_or(0);
+        match n.name.as_str() {
+            "edge_detector" => {
+                report.frames_with_line.insert(cam.clone(), get("frames_with_line"));
+            }
+            "triangulator" => {
+                report.points.insert(cam.clone(), get("points"));
+            }
+            "mesher" => {
+                report.triangles.insert(cam.clone(), get("triangles"));
+                report.dropped_frames.insert(cam.clone(), get("dropped_frames"));
+            }
+            "merger" => {
+                report.merged_points = get("points");
+                report.merged_triangles = get("triangles");
+            }
+            _ => {}
+        }
+        *stage.entry(n.name.clone()).or_default() += n.busy_ns as f64 * 1e-9;
+        report.nodes.push(NodeReport {
+            node: n.fq_name(),
+            messages: n.handled,
+            errors: n.errors,
+            seconds: n.busy_ns as f64 * 1e-9,
+            counters,
+        });
+    }
+    stage.insert("decode".into(), read_s);
+    let total = t_start.elapsed().as_secs_f64();
+    stage.insert("total".into(), total);
+    report.timings_s = stage;
+    report.frames_per_second = images as f64 / total.max(1e-9);
+
+    // One scan: its files go straight into DIR.
+    let mut scan_dirs: Vec<(u32, PathBuf)> = std::fs::read_dir(&opts.out)?
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let id = name.strip_prefix("scan_")?.split('_').next()?.parse().ok()?;
+            e.path().is_dir().then_some((id, e.path()))
+        })
+        .collect();
+    scan_dirs.sort();
+    report.scans = scan_dirs.iter().map(|s| s.0).collect();
+    if scan_dirs.len() == 1 {
+        let dir = &scan_dirs[0].1;
+        for e in std::fs::read_dir(dir)?.filter_map(|e| e.ok()) {
+            std::fs::rename(e.path(), opts.out.join(e.file_name()))?;
+        }
+        std::fs::remove_dir(dir)?;
+    }
+    report.files = list_files(&opts.out, &opts.out);
+    report.files.push("report.json".into());
+    report.peak_rss_bytes = peak_rss_bytes();
+    let json = serde_json::to_string_pretty(&report)?;
+    xsurf_formats::write_bytes_atomic(&opts.out.join("report.json"), json.as_bytes())?;
+    Ok(report)
+}
+
+fn list_files(root: &Path, dir: &Path) -> Vec<String> {
+    let mut v = Vec::new();
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        for e in rd.filter_map(|e| e.ok()) {
+            let p = e.path();
+            if p.is_dir() {
+                v.extend(list_files(root, &p));
+            } else if let Ok(rel) = p.strip_prefix(root) {
+                let s = rel.to_string_lossy().into_owned();
+                if !s.ends_with(".tmp") && s != "report.json" {
+                    v.push(s);
+                }
+            }
+        }
+    }
+    v.sort();
+    v
+}

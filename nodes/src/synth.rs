@@ -1,0 +1,196 @@
+//! Writes a synthetic scan as a rosbag2 bag, as the live graph would record it: both cameras'
+//! `image_raw` and `camera_info`, `/tf` (`table -> carm` at 100 Hz), `/tf_static`
+//! (`carm -> <cam>_optical_frame`), `/joint_states` and `/scan/events`; plus the ground truth
+//! beside it (`truth.json`, `truth_<cam>.ply`, the rig and a params file).
+
+use crate::convert;
+use anyhow::Context;
+use serde::Serialize;
+use std::path::Path;
+use xsurf_core::mesh::Mesh;
+use xsurf_core::synth::Scanner;
+use xsurf_formats::bag::{BagOptions, BagWriter, Qos};
+use xsurf_msgs::sensor_msgs::{CameraInfo, Image, JointState};
+use xsurf_msgs::tf2_msgs::TFMessage;
+use xsurf_msgs::xsurf_msgs::ScanEvent;
+use xsurf_msgs::{cdr, RosMessage};
+
+/// Rate of `/tf` and `/joint_states`, Hz.
+pub const POSE_RATE_HZ: f64 = 100.0;
+/// Simulated transport delay between exposure and recording, ns.
+const IMAGE_LATENCY_NS: i64 = 4_000_000;
+
+/// What was written.
+#[derive(Debug, Clone, Serialize)]
+pub struct SynthSummary {
+    /// Scene name.
+    pub scene: String,
+    /// Frames per camera.
+    pub frames: u32,
+    /// Cameras.
+    pub cameras: Vec<String>,
+    /// Messages in the bag.
+    pub messages: u64,
+    /// Ground-truth points per camera.
+    pub truth_points: Vec<usize>,
+}
+
+enum Item {
+    Pose(i64),
+    Frame(u32),
+    Event(i64, u8),
+}
+
+fn put<M: RosMessage>(w: &mut BagWriter, topic: &str, t: i64, m: &M) -> anyhow::Result<()> {
+    let bytes = cdr::encode(m)?;
+    w.write(topic, t as u64, t as u64, &bytes)?;
+    Ok(())
+}
+
+/// Renders `scanner`'s scan into the bag directory `dir` (which must not exist or be empty).
+/// `min_ray_plane_angle_deg` is the triangulator's, so the truth matches what can be observed.
+pub fn write_bag(
+    dir: &Path,
+    scanner: &Scanner,
+    zstd: bool,
+    scan_id: u32,
+    mut progress: impl FnMut(u32, u32),
+) -> anyhow::Result<SynthSummary> {
+    let rig = &scanner.rig;
+    let mut w = BagWriter::create(dir, BagOptions { zstd })?;
+    for c in &rig.cameras {
+        w.add_topic(&format!("/{}/image_raw", c.name), Image::TYPE_NAME, &Image::definition(), &Qos::SENSOR)?;
+        w.add_topic(
+            &format!("/{}/camera_info", c.name),
+            CameraInfo::TYPE_NAME,
+            &CameraInfo::definition(),
+            &Qos::SENSOR,
+        )?;
+    }
+    w.add_topic("/tf", TFMessage::TYPE_NAME, &TFMessage::definition(), &Qos::RELIABLE)?;
+    w.add_topic("/tf_static", TFMessage::TYPE_NAME, &TFMessage::definition(), &Qos::STATIC)?;
+    w.add_topic("/joint_states", JointState::TYPE_NAME, &JointState::definition(), &Qos::RELIABLE)?;
+    w.add_topic("/scan/events", ScanEvent::TYPE_NAME, &ScanEvent::definition(), &Qos::RELIABLE)?;
+
+    let n = scanner.frame_count();
+    let t0 = scanner.settings.start_stamp_ns;
+    let margin = 0.1;
+    let mut items: Vec<(i64, Item)> = Vec::new();
+    let steps = ((scanner.duration_s() + 2.0 * margin) * POSE_RATE_HZ).ceil() as i64;
+    for k in 0..=steps {
+        let t = t0 + ((-margin + k as f64 / POSE_RATE_HZ) * 1e9).round() as i64;
+        items.push((t, Item::Pose(t)));
+    }
+    for f in 0..n {
+        let ft = scanner.frame_time(f);
+        items.push((ft.stamp_ns + IMAGE_LATENCY_NS, Item::Frame(f)));
+    }
+    let start = t0 - 50_000_000;
+    let end = t0 + (scanner.duration_s() * 1e9) as i64 + 50_000_000;
+    items.push((start, Item::Event(start, ScanEvent::START)));
+    items.push((end + IMAGE_LATENCY_NS + 1, Item::Event(end, ScanEvent::END)));
+    items.sort_by_key(|(t, _)| *t);
+
+    // Static transforms first, at the start.
+    let statics = TFMessage {
+        transforms: rig
+            .cameras
+            .iter()
+            .map(|c| {
+                convert::transform_stamped(start, "carm", &format!("{}_optical_frame", c.name), &c.carm_from_optical())
+            })
+            .collect(),
+    };
+    put(&mut w, "/tf_static", items[0].0, &statics)?;
+    let models: Vec<_> = rig.cameras.iter().map(|c| c.model()).collect::<Result<_, _>>()?;
+    for (t, item) in items {
+        match item {
+            Item::Pose(stamp) => {
+                let s = scanner.seconds_of(stamp);
+                let pose = scanner.pose_at(s);
+                put(
+                    &mut w,
+                    "/tf",
+                    t,
+                    &TFMessage { transforms: vec![convert::transform_stamped(stamp, "table", "carm", &pose)] },
+                )?;
+                let js = JointState {
+                    header: convert::header(stamp, ""),
+                    name: vec!["carm_travel".into(), "carm_angle".into()],
+                    position: vec![scanner.travel_at(s), 0.0],
+                    velocity: vec![scanner.settings.speed_mps, 0.0],
+                    effort: vec![],
+                };
+                put(&mut w, "/joint_states", t, &js)?;
+            }
+            Item::Frame(f) => {
+                let ft = scanner.frame_time(f);
+                for (ci, c) in rig.cameras.iter().enumerate() {
+                    let frame = format!("{}_optical_frame", c.name);
+                    let header = convert::header(ft.stamp_ns, &frame);
+                    put(
+                        &mut w,
+                        &format!("/{}/camera_info", c.name),
+                        t,
+                        &convert::camera_info(&models[ci], header.clone()),
+                    )?;
+                    let img = Image::from_image(header, scanner.render(ci, f));
+                    put(&mut w, &format!("/{}/image_raw", c.name), t, &img)?;
+                }
+                progress(f + 1, n);
+            }
+            Item::Event(stamp, event) => {
+                let e = ScanEvent { header: convert::header(stamp, "table"), scan_id, event };
+                put(&mut w, "/scan/events", t, &e)?;
+            }
+        }
+    }
+    let meta = w.finish()?;
+    let truth = write_truth(dir, scanner)?;
+    Ok(SynthSummary {
+        scene: scanner.scene.name.clone(),
+        frames: n,
+        cameras: rig.cameras.iter().map(|c| c.name.clone()).collect(),
+        messages: meta.message_count,
+        truth_points: truth,
+    })
+}
+
+/// The ground truth beside a synthetic bag: `truth.json` (scene, scan settings, counts),
+/// `truth_<cam>.ply` (the points each camera can observe on the sheet), `rig.yaml` and
+/// `params.yaml` (the laser plane for `reconstruct`).
+pub fn write_truth(dir: &Path, scanner: &Scanner) -> anyhow::Result<Vec<usize>> {
+    let mut counts = Vec::new();
+    for (ci, c) in scanner.rig.cameras.iter().enumerate() {
+        let pts: Vec<[f32; 3]> = (0..scanner.frame_count())
+            .flat_map(|f| scanner.observable_points(ci, f, 10.0))
+            .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+            .collect();
+        counts.push(pts.len());
+        let mesh = Mesh { positions: pts, ..Default::default() };
+        xsurf_formats::ply::write_file(&dir.join(format!("truth_{}.ply", c.name)), &mesh)?;
+    }
+    let s = &scanner.settings;
+    let truth = serde_json::json!({
+        "scene": scanner.scene.name,
+        "frames": scanner.frame_count(),
+        "speed_mps": s.speed_mps,
+        "fps": s.fps,
+        "seed": s.seed,
+        "encoding": s.encoding.ros_name(),
+        "travel_m": scanner.travel_range(),
+        "laser_sheet_sigma_m": scanner.laser.sheet_sigma_m,
+        "truth_points": counts,
+        "truth_ply": "truth_<cam>.ply: points on the laser sheet each camera can observe (table frame, metres)",
+    });
+    xsurf_formats::write_bytes_atomic(&dir.join("truth.json"), serde_json::to_string_pretty(&truth)?.as_bytes())?;
+    let rig = serde_yaml::to_string(&scanner.rig).context("rig to YAML")?;
+    xsurf_formats::write_bytes_atomic(&dir.join("rig.yaml"), rig.as_bytes())?;
+    let p = scanner.rig.laser_plane;
+    let params = format!(
+        "# Parameters for reconstructing this synthetic scan (ROS 2 params-file format).\n/**:\n  ros__parameters:\n    laser_plane: [{}, {}, {}, {}]\n",
+        p[0], p[1], p[2], p[3]
+    );
+    xsurf_formats::write_bytes_atomic(&dir.join("params.yaml"), params.as_bytes())?;
+    Ok(counts)
+}

@@ -1,0 +1,73 @@
+//! The part of tf the scanner needs: static transforms (with chains through them) and the
+//! moving `table -> carm`, interpolated at image stamps.
+
+use crate::convert;
+use std::collections::HashMap;
+use xsurf_core::geom::Iso3;
+use xsurf_core::pose::{PoseError, PoseTrack};
+use xsurf_msgs::tf2_msgs::TFMessage;
+
+/// Static transforms plus the `table -> carm` track.
+#[derive(Debug, Clone)]
+pub struct TfBuffer {
+    /// Name of the table frame.
+    pub table_frame: String,
+    /// Name of the C-arm frame.
+    pub carm_frame: String,
+    statics: HashMap<String, (String, Iso3)>,
+    track: PoseTrack,
+}
+
+impl TfBuffer {
+    /// An empty buffer.
+    pub fn new(table_frame: &str, carm_frame: &str, max_gap_ns: i64) -> Self {
+        let mut track = PoseTrack::default();
+        track.max_gap_ns = max_gap_ns;
+        Self { table_frame: table_frame.into(), carm_frame: carm_frame.into(), statics: HashMap::new(), track }
+    }
+    /// Adds the transforms of a `/tf_static` message.
+    pub fn add_static(&mut self, m: &TFMessage) {
+        for t in &m.transforms {
+            self.statics.insert(
+                t.child_frame_id.trim_start_matches('/').to_string(),
+                (t.header.frame_id.trim_start_matches('/').to_string(), convert::iso(&t.transform)),
+            );
+        }
+    }
+    /// Adds the `table -> carm` samples of a `/tf` message (other transforms are ignored).
+    pub fn add_dynamic(&mut self, m: &TFMessage) {
+        for t in &m.transforms {
+            if t.header.frame_id.trim_start_matches('/') == self.table_frame
+                && t.child_frame_id.trim_start_matches('/') == self.carm_frame
+            {
+                self.track.push(t.header.stamp.nanos(), &convert::iso(&t.transform));
+            }
+        }
+    }
+    /// The newest `table -> carm` stamp.
+    pub fn latest_pose_stamp(&self) -> Option<i64> {
+        self.track.latest_stamp()
+    }
+    /// `table -> carm` at a stamp.
+    pub fn table_from_carm(&self, stamp_ns: i64) -> Result<Iso3, PoseError> {
+        self.track.at(stamp_ns)
+    }
+    /// `carm -> frame` through the static transforms (`None` when no chain leads there).
+    pub fn carm_from(&self, frame: &str) -> Option<Iso3> {
+        let mut t = Iso3::IDENTITY;
+        let mut f = frame.trim_start_matches('/').to_string();
+        for _ in 0..16 {
+            if f == self.carm_frame {
+                return Some(t);
+            }
+            let (parent, p_from_f) = self.statics.get(&f)?;
+            t = p_from_f.compose(&t);
+            f = parent.clone();
+        }
+        None
+    }
+    /// Forgets the moving pose (a new scan).
+    pub fn clear_dynamic(&mut self) {
+        self.track.clear();
+    }
+}

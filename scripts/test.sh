@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# The whole test suite, as CI runs it on a fresh clone: set-up, format, lints, the
+# forbidden-dependency check, and every test (release build: the synthetic scanner renders
+# real images).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+export CARGO_TERM_COLOR=never
+echo "== set-up: Python checkers"
+bash scripts/setup-venv.sh
+echo "== cargo fmt --check"
+cargo fmt --all -- --check
+echo "== forbidden dependencies of the algorithm crate"
+bash scripts/check-deps.sh
+echo "== cargo clippy"
+cargo clippy --workspace --all-targets --release -- -D warnings
+echo "== cargo test"
+XSURF_REQUIRE_CHECKERS=1 cargo test --workspace --release 2>&1 | tee target/test-output.txt
+# One closing line summing every test binary.
+awk '/^test result:/ {p += $4; f += $6} END {printf "%d passed, %d failed\n", p, f}' target/test-output.txt
