@@ -45,6 +45,8 @@ pub struct NodeReport {
     pub seconds: f64,
     /// The node's own counters.
     pub counters: BTreeMap<String, u64>,
+    /// The last message it refused, and why.
+    pub last_error: Option<String>,
 }
 
 /// What `report.json` holds.
@@ -313,6 +315,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             errors: n.errors,
             seconds: n.busy_ns as f64 * 1e-9,
             counters,
+            last_error: n.last_error.clone(),
         });
     }
     stage.insert("decode".into(), read_s);
@@ -345,6 +348,34 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     let json = serde_json::to_string_pretty(&report)?;
     xsurf_formats::write_bytes_atomic(&opts.out.join("report.json"), json.as_bytes())?;
     Ok(report)
+}
+
+impl Report {
+    /// Problems that make the result incomplete, one line each: a truncated bag, a camera
+    /// that produced no points (with the last reason its nodes gave), refused messages.
+    pub fn problems(&self) -> Vec<String> {
+        let mut v = Vec::new();
+        if let Some(t) = &self.truncated {
+            v.push(format!("the bag ended early; reconstructed up to the cut: {t}"));
+        }
+        for c in &self.cameras {
+            if self.frames_read.get(c).copied().unwrap_or(0) > 0 && self.points.get(c).copied().unwrap_or(0) == 0 {
+                let why = self
+                    .nodes
+                    .iter()
+                    .filter(|n| n.node.starts_with(&format!("/{c}/")))
+                    .find_map(|n| {
+                        n.last_error.clone().map(|e| format!("{} refused {} message(s), last: {e}", n.node, n.errors))
+                    })
+                    .unwrap_or_else(|| "no laser line was found in any frame".into());
+                v.push(format!("camera {c}: no points: {why}"));
+            }
+        }
+        for (topic, n) in &self.undecodable {
+            v.push(format!("{n} message(s) on {topic} could not be decoded"));
+        }
+        v
+    }
 }
 
 fn list_files(root: &Path, dir: &Path) -> Vec<String> {

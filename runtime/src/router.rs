@@ -25,6 +25,8 @@ pub struct Placed {
     pub handled: u64,
     /// Time spent in its handlers, ns.
     pub busy_ns: u64,
+    /// The last message it refused, and why.
+    pub last_error: Option<String>,
 }
 
 impl Placed {
@@ -76,6 +78,7 @@ impl Router {
             errors: 0,
             handled: 0,
             busy_ns: 0,
+            last_error: None,
         });
         idx
     }
@@ -106,7 +109,13 @@ impl Router {
             n.busy_ns += t0.elapsed().as_nanos() as u64;
             if let Err(e) = r {
                 n.errors += 1;
-                log::warn!("{}: message on {topic} refused: {e}", n.fq_name());
+                // The first few are logged; all are counted, and the last is kept for reports.
+                if n.errors <= 5 {
+                    log::warn!("{}: message on {topic} refused: {e}", n.fq_name());
+                } else if n.errors == 6 {
+                    log::warn!("{}: more messages refused; counting them quietly", n.fq_name());
+                }
+                n.last_error = Some(format!("{topic}: {e}"));
             }
             self.deliver(node, out);
         }

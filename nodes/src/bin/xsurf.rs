@@ -155,8 +155,22 @@ fn cmd_reconstruct(args: &[String]) -> anyhow::Result<()> {
     };
     let r = offline::reconstruct(&opts)?;
     print_report(&r, out);
+    let problems = r.problems();
+    if !problems.is_empty() {
+        return Err(anyhow!(Incomplete(problems)));
+    }
     Ok(())
 }
+
+/// The reconstruction ran but its input was partly bad: exit code 3, outputs kept.
+#[derive(Debug)]
+struct Incomplete(Vec<String>);
+impl std::fmt::Display for Incomplete {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "the reconstruction is incomplete (files written, see report.json):\n  {}", self.0.join("\n  "))
+    }
+}
+impl std::error::Error for Incomplete {}
 
 fn print_report(r: &offline::Report, out: &str) {
     println!(
@@ -178,9 +192,6 @@ fn print_report(r: &offline::Report, out: &str) {
         );
     }
     println!("  merged: {} points, {} triangles", r.merged_points, r.merged_triangles);
-    if let Some(t) = &r.truncated {
-        println!("  WARNING: the bag ended early; reconstructed up to the cut: {t}");
-    }
     println!("files in {out}: {}", r.files.join(", "));
 }
 
@@ -280,9 +291,14 @@ fn main() -> ExitCode {
     match r {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            let is_usage = e.downcast_ref::<UsageError>().is_some();
             eprintln!("xsurf: error: {e:#}");
-            ExitCode::from(if is_usage { 2 } else { 1 })
+            if e.downcast_ref::<UsageError>().is_some() {
+                ExitCode::from(2)
+            } else if e.downcast_ref::<Incomplete>().is_some() {
+                ExitCode::from(3)
+            } else {
+                ExitCode::from(1)
+            }
         }
     }
 }

@@ -1,0 +1,260 @@
+//! `xsurf reconstruct`: outputs read by independent tools, several scans, and bad input
+//! (each: one clear message naming the file, topic, time or offset; a non-zero exit; no panic).
+#![allow(clippy::unwrap_used)]
+
+mod common;
+use common::*;
+use std::path::Path;
+use std::sync::Arc;
+use xsurf_formats::bag::{Bag, BagOptions, BagWriter, Qos, RawMessage};
+use xsurf_runtime::component::Msg;
+
+/// Rewrites `src` into `dst`, passing each message through `f` (None drops it); `types` may
+/// override a topic's type name in the new bag.
+fn rewrite(src: &Path, dst: &Path, types: &[(&str, &str)], mut f: impl FnMut(RawMessage) -> Vec<RawMessage>) {
+    let bag = Bag::open(src).unwrap();
+    let mut w = BagWriter::create(dst, BagOptions::default()).unwrap();
+    for t in &bag.metadata.topics {
+        let ty = types.iter().find(|(n, _)| *n == t.name).map_or(t.type_name.as_str(), |x| x.1);
+        let def = Msg::definition(ty).unwrap_or_else(|| "string data\n".into());
+        w.add_topic(&t.name, ty, &def, &t.qos.unwrap_or(Qos::RELIABLE)).unwrap();
+    }
+    for m in bag.messages() {
+        for m in f(m.unwrap()) {
+            w.write(&m.topic, m.log_time_ns, m.publish_time_ns, &m.data).unwrap();
+        }
+    }
+    w.finish().unwrap();
+}
+
+fn reconstruct(bag: &Path, out: &Path) -> std::process::Output {
+    let params = pyramid_bag().join("params.yaml");
+    xsurf(&[
+        "reconstruct",
+        bag.to_str().unwrap(),
+        "--params-file",
+        params.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ])
+}
+
+#[test]
+fn outputs_are_complete_and_read_by_trimesh() {
+    let dir = scratch("outputs");
+    let out = reconstruct(pyramid_bag(), &dir);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for f in ["cam1.ply", "cam2.ply", "merged.ply", "scene.wrl", "scene.glb", "report.json"] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    assert!(std::fs::read_dir(&dir).unwrap().all(|e| !e.unwrap().file_name().to_string_lossy().ends_with(".tmp")));
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["frames_read"]["cam1"], 78);
+    assert!(report["frames_with_line"]["cam1"].as_u64().unwrap() >= 70);
+    assert!(report["timings_s"]["edge_detector"].as_f64().unwrap() > 0.0);
+    assert!(report["peak_rss_bytes"].as_u64().unwrap() > 0);
+    let read = |f: &str| {
+        xsurf_formats::ply::read(&mut std::io::BufReader::new(std::fs::File::open(dir.join(f)).unwrap())).unwrap()
+    };
+    let (c1, c2, merged) = (read("cam1.ply"), read("cam2.ply"), read("merged.ply"));
+    assert_eq!(merged.positions.len(), c1.positions.len() + c2.positions.len());
+    assert_eq!(report["merged_triangles"].as_u64().unwrap() as usize, merged.triangles.len());
+    let wrl = std::fs::read_to_string(dir.join("scene.wrl")).unwrap();
+    assert!(wrl.starts_with("#VRML V2.0 utf8") && wrl.contains("DEF cam1 Shape") && wrl.contains("DEF cam2 Shape"));
+    let Some(j) = checker("check_mesh.py", &[&dir.join("merged.ply"), &dir.join("cam1.ply"), &dir.join("scene.glb")])
+    else {
+        return;
+    };
+    let get = |f: &str, k: &str| j[dir.join(f).to_str().unwrap()][k].as_u64().unwrap() as usize;
+    assert_eq!(get("merged.ply", "vertices"), merged.positions.len());
+    assert_eq!(get("merged.ply", "faces"), merged.triangles.len());
+    assert_eq!(get("cam1.ply", "faces"), c1.triangles.len());
+    assert_eq!(get("scene.glb", "vertices"), merged.positions.len());
+    assert_eq!(get("scene.glb", "faces"), merged.triangles.len());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Shifts every stamp of a message by `dt` ns and sets scan events' id.
+fn shifted(m: &RawMessage, dt: i64, scan_id: u32) -> RawMessage {
+    let msg = Msg::decode(&m.type_name, &m.data).unwrap();
+    let sh = |t: &mut xsurf_msgs::builtin_interfaces::Time| {
+        *t = xsurf_msgs::builtin_interfaces::Time::from_nanos(t.nanos() + dt)
+    };
+    let msg = match msg {
+        Msg::Image(i) => {
+            let mut i = (*i).clone();
+            sh(&mut i.header.stamp);
+            Msg::Image(Arc::new(i))
+        }
+        Msg::CameraInfo(i) => {
+            let mut i = (*i).clone();
+            sh(&mut i.header.stamp);
+            Msg::CameraInfo(Arc::new(i))
+        }
+        Msg::Tf(t) => {
+            let mut t = (*t).clone();
+            t.transforms.iter_mut().for_each(|x| sh(&mut x.header.stamp));
+            Msg::Tf(Arc::new(t))
+        }
+        Msg::JointState(j) => {
+            let mut j = (*j).clone();
+            sh(&mut j.header.stamp);
+            Msg::JointState(Arc::new(j))
+        }
+        Msg::ScanEvent(e) => {
+            let mut e = (*e).clone();
+            sh(&mut e.header.stamp);
+            e.scan_id = scan_id;
+            Msg::ScanEvent(Arc::new(e))
+        }
+        other => other,
+    };
+    RawMessage {
+        data: msg.encode().unwrap(),
+        log_time_ns: (m.log_time_ns as i64 + dt) as u64,
+        publish_time_ns: (m.publish_time_ns as i64 + dt) as u64,
+        ..m.clone()
+    }
+}
+
+#[test]
+fn several_scans_go_to_their_own_folders() {
+    let dir = scratch("two-scans");
+    let two = dir.join("two");
+    // Scan 1 as recorded, then the same scan again 10 s later as scan 2.
+    let bag = Bag::open(pyramid_bag()).unwrap();
+    let all: Vec<RawMessage> = bag.messages().map(Result::unwrap).collect();
+    let mut second: Vec<RawMessage> =
+        all.iter().filter(|m| m.topic != "/tf_static").map(|m| shifted(m, 10_000_000_000, 2)).collect();
+    let mut i = 0;
+    rewrite(pyramid_bag(), &two, &[], |m| {
+        i += 1;
+        if i == all.len() {
+            let mut v = vec![m];
+            v.append(&mut second);
+            v
+        } else {
+            vec![m]
+        }
+    });
+    let out_dir = dir.join("out");
+    let out = reconstruct(&two, &out_dir);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for scan in ["scan_1", "scan_2"] {
+        for f in ["cam1.ply", "cam2.ply", "merged.ply", "scene.wrl", "scene.glb"] {
+            assert!(out_dir.join(scan).join(f).is_file(), "{scan}/{f}");
+        }
+    }
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["scans"], serde_json::json!([1, 2]));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn missing_or_malformed_metadata() {
+    let dir = scratch("metadata");
+    let b = dir.join("b");
+    copy_bag(pyramid_bag(), &b);
+    std::fs::remove_file(b.join("metadata.yaml")).unwrap();
+    assert_clean_failure(&reconstruct(&b, &dir.join("o1")), 1, "metadata.yaml");
+    std::fs::write(b.join("metadata.yaml"), "rosbag2_bagfile_information:\n  version: 8\n  storage_identifier: mcap\n")
+        .unwrap();
+    assert_clean_failure(&reconstruct(&b, &dir.join("o2")), 1, "metadata.yaml: missing or non-numeric");
+    std::fs::write(b.join("metadata.yaml"), "a: [1, 2\nb: }\n").unwrap();
+    assert_clean_failure(&reconstruct(&b, &dir.join("o3")), 1, "metadata.yaml: not YAML");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn truncated_mcap_is_reconstructed_up_to_the_cut() {
+    let dir = scratch("truncated");
+    let b = dir.join("b");
+    copy_bag(pyramid_bag(), &b);
+    let meta = Bag::open(&b).unwrap().metadata;
+    let f = b.join(&meta.files[0]);
+    let len = std::fs::metadata(&f).unwrap().len();
+    std::fs::OpenOptions::new().write(true).open(&f).unwrap().set_len(len * 6 / 10).unwrap();
+    let out_dir = dir.join("out");
+    let out = reconstruct(&b, &out_dir);
+    assert_clean_failure(&out, 3, "byte offset");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("report.json")).unwrap()).unwrap();
+    assert!(report["truncated"].as_str().unwrap().contains(meta.files[0].as_str()));
+    let frames = report["frames_read"]["cam1"].as_u64().unwrap();
+    assert!(frames > 10 && frames < 78, "{frames}");
+    assert!(out_dir.join("merged.ply").is_file(), "what was read is reconstructed");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn topic_with_an_unknown_type() {
+    let dir = scratch("unknown-type");
+    let b = dir.join("b");
+    rewrite(pyramid_bag(), &b, &[("/cam1/image_raw", "foo_msgs/msg/Frame")], |m| vec![m]);
+    assert_clean_failure(&reconstruct(&b, &dir.join("o")), 1, "topic /cam1/image_raw has type foo_msgs/msg/Frame");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn image_encoding_we_do_not_handle() {
+    let dir = scratch("encoding");
+    let b = dir.join("b");
+    rewrite(pyramid_bag(), &b, &[], |m| {
+        if m.topic != "/cam2/image_raw" {
+            return vec![m];
+        }
+        let mut img: xsurf_msgs::sensor_msgs::Image = xsurf_msgs::cdr::decode(&m.data).unwrap();
+        img.encoding = "yuv422".into();
+        vec![RawMessage { data: xsurf_msgs::cdr::encode(&img).unwrap(), ..m }]
+    });
+    let out = reconstruct(&b, &dir.join("o"));
+    assert_clean_failure(&out, 3, "camera cam2: no points");
+    assert_clean_failure(&out, 3, "unsupported image encoding \"yuv422\"");
+    assert!(dir.join("o/cam1.ply").is_file(), "the good camera's surface is still written");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn no_camera_info() {
+    let dir = scratch("no-info");
+    let b = dir.join("b");
+    let bag = Bag::open(pyramid_bag()).unwrap();
+    // Drop the topic entirely: metadata without it.
+    let mut w = BagWriter::create(&b, BagOptions::default()).unwrap();
+    for t in bag.metadata.topics.iter().filter(|t| t.name != "/cam2/camera_info") {
+        w.add_topic(&t.name, &t.type_name, &Msg::definition(&t.type_name).unwrap(), &t.qos.unwrap()).unwrap();
+    }
+    for m in bag.messages().map(Result::unwrap).filter(|m| m.topic != "/cam2/camera_info") {
+        w.write(&m.topic, m.log_time_ns, m.publish_time_ns, &m.data).unwrap();
+    }
+    w.finish().unwrap();
+    assert_clean_failure(&reconstruct(&b, &dir.join("o")), 1, "no /cam2/camera_info in the bag");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn no_tf_for_a_camera_frame() {
+    let dir = scratch("no-tf");
+    let b = dir.join("b");
+    rewrite(pyramid_bag(), &b, &[], |m| {
+        if m.topic != "/tf_static" {
+            return vec![m];
+        }
+        let mut tf: xsurf_msgs::tf2_msgs::TFMessage = xsurf_msgs::cdr::decode(&m.data).unwrap();
+        tf.transforms.retain(|t| t.child_frame_id != "cam2_optical_frame");
+        vec![RawMessage { data: xsurf_msgs::cdr::encode(&tf).unwrap(), ..m }]
+    });
+    let out = reconstruct(&b, &dir.join("o"));
+    assert_clean_failure(&out, 3, "no tf from carm to cam2_optical_frame");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    assert_clean_failure(&xsurf(&["reconstruct"]), 2, "reconstruct needs one BAG");
+    assert_clean_failure(&xsurf(&["reconstruct", "x", "--bogus"]), 2, "unknown option --bogus");
+    assert_clean_failure(&xsurf(&["synth", "teapot", "-o", "/tmp/x"]), 2, "unknown scene \"teapot\"");
+    assert_clean_failure(&xsurf(&["frobnicate"]), 2, "unknown command");
+}
