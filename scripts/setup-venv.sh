@@ -1,12 +1,29 @@
 #!/usr/bin/env bash
-# Creates .venv with the independent checkers the tests use (rosbags, mcap-ros2-support,
-# trimesh, cyclonedds, pydicom). Idempotent: reinstalls only when tests/requirements.txt changes.
+# Installs the independent checkers the tests use, each from its own registry:
+#  - .venv: rosbags, mcap-ros2-support, trimesh, cyclonedds, pydicom (PyPI);
+#  - tests/gltf/node_modules: the Khronos glTF validator (npm);
+#  - .venv/bin/vrml_check: a VRML 2.0 reader built on Coin3D (Debian's libcoin-dev).
+# Idempotent: each part is redone only when its inputs change.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 stamp=.venv/.requirements
-if [[ -x .venv/bin/python && -f $stamp ]] && cmp -s tests/requirements.txt "$stamp"; then
-  exit 0
+if ! [[ -x .venv/bin/python && -f $stamp ]] || ! cmp -s tests/requirements.txt "$stamp"; then
+  python3 -m venv .venv
+  .venv/bin/pip install --quiet --disable-pip-version-check -r tests/requirements.txt
+  cp tests/requirements.txt "$stamp"
 fi
-python3 -m venv .venv
-.venv/bin/pip install --quiet --disable-pip-version-check -r tests/requirements.txt
-cp tests/requirements.txt "$stamp"
+if ! [[ -d tests/gltf/node_modules/gltf-validator ]]; then
+  (cd tests/gltf && npm ci --silent --no-audit --no-fund)
+fi
+if ! [[ -x .venv/bin/vrml_check && .venv/bin/vrml_check -nt tests/vrml/vrml_check.cpp ]]; then
+  if ! [[ -f /usr/include/Inventor/SoDB.h ]]; then
+    if [[ $(id -u) -eq 0 ]]; then
+      apt-get update -qq >/dev/null
+      DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends libcoin-dev >/dev/null
+    else
+      echo "setup: libcoin-dev is needed for the VRML check: sudo apt-get install libcoin-dev" >&2
+      exit 1
+    fi
+  fi
+  g++ -O1 -o .venv/bin/vrml_check tests/vrml/vrml_check.cpp -lCoin
+fi
