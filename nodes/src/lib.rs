@@ -7,7 +7,8 @@
 
 pub mod components;
 pub mod convert;
-pub mod logging;
+pub mod host;
 pub mod offline;
+pub mod play;
 pub mod synth;
 pub mod tf;

@@ -6,6 +6,8 @@
 #![deny(missing_docs)]
 
 pub mod component;
+pub mod dds;
+pub mod logging;
 pub mod params;
 pub mod rosargs;
 pub mod router;

@@ -5,8 +5,9 @@
 //! xsurf synth SCENE -o DIR [--size WxH] [--speed M_S] [--fps F] [--encoding E] [--seed N] [--zstd]
 //! xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
 //! xsurf bag info DIR
+//! xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
 //! ```
-//! None of these opens a DDS participant.
+//! Only `bag play` opens a DDS participant.
 
 use anyhow::{anyhow, bail, Context};
 use std::path::{Path, PathBuf};
@@ -25,7 +26,9 @@ const USAGE: &str = "usage:
   xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
       reconstruct a recorded scan offline: DIR/<cam>.ply, merged.ply, scene.wrl, scene.glb, report.json
   xsurf bag info DIR
-      summarize a bag, like `ros2 bag info`";
+      summarize a bag, like `ros2 bag info`
+  xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
+      publish a bag over DDS with its original timing (honours ROS_DOMAIN_ID, ROS_LOCALHOST_ONLY)";
 
 /// A command-line mistake: exit code 2.
 #[derive(Debug)]
@@ -262,19 +265,35 @@ fn cmd_demo(args: &[String]) -> anyhow::Result<()> {
 
 fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
     match args.first().map(String::as_str) {
+        Some("play") => {
+            let a =
+                Args::parse(&args[1..], &["--loop", "--clock"], &["--rate", "--start-offset", "--delay", "--topics"])?;
+            let [dir] = a.positional.as_slice() else { return Err(usage("bag play needs one DIR")) };
+            let opts = xsurf_nodes::play::PlayOptions {
+                rate: a.num("--rate", 1.0)?,
+                repeat: a.has("--loop"),
+                clock: a.has("--clock"),
+                topics: a.get("--topics").map(|t| t.split(',').map(str::to_string).collect()).unwrap_or_default(),
+                start_offset_s: a.num("--start-offset", 0.0)?,
+                delay_s: a.num("--delay", 1.0)?,
+            };
+            let n = xsurf_nodes::play::play(Path::new(dir), &opts)?;
+            eprintln!("bag play: {n} messages published");
+            Ok(())
+        }
         Some("info") => {
             let [dir] = &args[1..] else { return Err(usage("bag info needs one DIR")) };
             let bag = xsurf_formats::bag::Bag::open(Path::new(dir))?;
             print!("{}", bag.info());
             Ok(())
         }
-        Some(other) => Err(usage(format!("unknown bag command {other:?} (info)"))),
-        None => Err(usage("bag needs a command (info)")),
+        Some(other) => Err(usage(format!("unknown bag command {other:?} (info, play)"))),
+        None => Err(usage("bag needs a command (info, play)")),
     }
 }
 
 fn main() -> ExitCode {
-    xsurf_nodes::logging::init(log::LevelFilter::Info, vec![]);
+    xsurf_runtime::logging::init(log::LevelFilter::Info, vec![]);
     let args: Vec<String> = std::env::args().skip(1).collect();
     let r = match args.first().map(String::as_str) {
         Some("demo") => cmd_demo(&args[1..]),

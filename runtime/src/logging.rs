@@ -2,7 +2,18 @@
 //! per-logger levels (the ROS 2 `--log-level` forms). RustDDS' per-datagram warnings are
 //! quiet unless asked for.
 
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
+
+/// Where log records also go (the node's `/rosout` publisher), set once a node exists.
+pub type RosoutSink = Box<dyn Fn(log::Level, &str, &str) + Send + Sync>;
+static ROSOUT: Mutex<Option<RosoutSink>> = Mutex::new(None);
+
+/// Forwards xsurf's own log records (info and above) to `sink` from now on.
+pub fn set_rosout(sink: RosoutSink) {
+    if let Ok(mut g) = ROSOUT.lock() {
+        *g = Some(sink);
+    }
+}
 
 struct Logger {
     level: log::LevelFilter,
@@ -25,7 +36,15 @@ impl log::Log for Logger {
     }
     fn log(&self, r: &log::Record<'_>) {
         if self.enabled(r.metadata()) {
-            eprintln!("[{}] [{}]: {}", r.level(), r.target(), r.args());
+            let msg = r.args().to_string();
+            eprintln!("[{}] [{}]: {msg}", r.level(), r.target());
+            if r.level() <= log::Level::Info && r.target().starts_with("xsurf") {
+                if let Ok(g) = ROSOUT.try_lock() {
+                    if let Some(sink) = g.as_ref() {
+                        sink(r.level(), r.target(), &msg);
+                    }
+                }
+            }
         }
     }
     fn flush(&self) {}

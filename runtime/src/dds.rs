@@ -1,0 +1,571 @@
+//! Hosting one component as a ROS 2 node over DDS (ros2-client / RustDDS).
+//!
+//! What the host adds to ros2-client, which has none of it: `ROS_DOMAIN_ID`,
+//! `ROS_LOCALHOST_ONLY=1` / `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` (loopback only, through
+//! `with_only_networks`), the node's parameters declared with their defaults so the standard
+//! parameter services answer `ros2 param list/get/set` (a set that fails the component's
+//! validation is refused with the reason), `use_sim_time` with `/clock` subscribed as
+//! `rosgraph_msgs/msg/Clock`, log records forwarded to `/rosout`, QoS by topic class, and a clean
+//! shutdown on SIGINT/SIGTERM (pending output flushed, the participant announces it leaves).
+//!
+//! Each subscription is read on its own thread into one bounded queue (depth
+//! [`QUEUE_DEPTH`]). When the queue is full, a camera-stream (best-effort) message is dropped and
+//! counted; other messages wait (their publishers are reliable).
+
+use crate::component::{Component, Msg, Outbox, QosClass};
+use crate::params::{ParamDecl, ParamValue, Params};
+use crate::rosargs::{resolve_topic, Remap};
+use futures::StreamExt;
+use ros2_client::dds::rustdds::DomainParticipantBuilder;
+use ros2_client::qos::{Durability, History, QosProfile, Reliability, WhenFull};
+use ros2_client::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions, ParameterValue as RosValue};
+use std::net::Ipv4Addr;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{sync_channel, RecvTimeoutError, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use xsurf_msgs::{
+    rosgraph_msgs::Clock, sensor_msgs::CameraInfo, sensor_msgs::Image, sensor_msgs::JointState,
+    sensor_msgs::PointCloud2, tf2_msgs::TFMessage, visualization_msgs::Marker, xsurf_msgs::LaserLine,
+    xsurf_msgs::ScanEvent,
+};
+
+/// Messages waiting for the component, at most.
+pub const QUEUE_DEPTH: usize = 64;
+
+/// Why the node could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum HostError {
+    /// An environment variable is malformed.
+    #[error("environment variable {name}={value:?}: {reason}")]
+    Env {
+        /// Variable.
+        name: &'static str,
+        /// Value.
+        value: String,
+        /// What is wrong.
+        reason: &'static str,
+    },
+    /// DDS refused something.
+    #[error("DDS: {0}")]
+    Dds(String),
+}
+
+/// The DDS domain and network settings from the ROS 2 environment variables.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DdsEnv {
+    /// `ROS_DOMAIN_ID` (0 when unset).
+    pub domain_id: u16,
+    /// `ROS_LOCALHOST_ONLY=1` or `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`.
+    pub localhost_only: bool,
+}
+
+impl DdsEnv {
+    /// Reads the environment (through `get`, so tests need not touch the process environment).
+    pub fn from_env(get: impl Fn(&str) -> Option<String>) -> Result<DdsEnv, HostError> {
+        let domain_id = match get("ROS_DOMAIN_ID").filter(|v| !v.trim().is_empty()) {
+            None => 0,
+            Some(v) => match v.trim().parse::<u16>() {
+                Ok(d) if d <= 232 => d,
+                _ => {
+                    return Err(HostError::Env {
+                        name: "ROS_DOMAIN_ID",
+                        value: v,
+                        reason: "must be an integer in 0..=232",
+                    })
+                }
+            },
+        };
+        let localhost_only = get("ROS_LOCALHOST_ONLY").is_some_and(|v| v.trim() == "1")
+            || get("ROS_AUTOMATIC_DISCOVERY_RANGE").is_some_and(|v| v.trim().eq_ignore_ascii_case("LOCALHOST"));
+        Ok(DdsEnv { domain_id, localhost_only })
+    }
+
+    /// A ros2-client context for these settings.
+    pub fn context(&self) -> Result<Context, HostError> {
+        let mut b = DomainParticipantBuilder::new(self.domain_id);
+        if self.localhost_only {
+            b = b.with_only_networks([Ipv4Addr::LOCALHOST]);
+        }
+        let dp = b.build().map_err(|e| HostError::Dds(format!("participant for domain {}: {e:?}", self.domain_id)))?;
+        Context::from_domain_participant(dp).map_err(|e| HostError::Dds(format!("context: {e:?}")))
+    }
+}
+
+/// The QoS of a topic class.
+pub fn qos(class: QosClass) -> QosProfile {
+    let reliable = Reliability::Reliable { when_full: WhenFull::Wait(Duration::from_millis(100)) };
+    let base = QosProfile::publisher_default();
+    match class {
+        QosClass::Sensor => base
+            .reliability(Reliability::BestEffort)
+            .history(History::KeepLast { depth: 5 })
+            .durability(Durability::Volatile),
+        QosClass::Reliable => {
+            base.reliability(reliable).history(History::KeepLast { depth: 10 }).durability(Durability::Volatile)
+        }
+        QosClass::Static => {
+            base.reliability(reliable).history(History::KeepLast { depth: 1 }).durability(Durability::TransientLocal)
+        }
+    }
+}
+
+/// Converts our parameter value to ros2-client's.
+pub fn to_ros(v: &ParamValue) -> RosValue {
+    match v {
+        ParamValue::Bool(b) => RosValue::Boolean(*b),
+        ParamValue::Integer(i) => RosValue::Integer(*i),
+        ParamValue::Double(d) => RosValue::Double(*d),
+        ParamValue::String(s) => RosValue::String(s.clone()),
+        ParamValue::BoolArray(a) => RosValue::BooleanArray(a.clone()),
+        ParamValue::IntegerArray(a) => RosValue::IntegerArray(a.clone()),
+        ParamValue::DoubleArray(a) => RosValue::DoubleArray(a.clone()),
+        ParamValue::StringArray(a) => RosValue::StringArray(a.clone()),
+    }
+}
+
+/// Converts ros2-client's parameter value to ours (`None` for unset and byte arrays).
+pub fn from_ros(v: &RosValue) -> Option<ParamValue> {
+    Some(match v {
+        RosValue::Boolean(b) => ParamValue::Bool(*b),
+        RosValue::Integer(i) => ParamValue::Integer(*i),
+        RosValue::Double(d) => ParamValue::Double(*d),
+        RosValue::String(s) => ParamValue::String(s.clone()),
+        RosValue::BooleanArray(a) => ParamValue::BoolArray(a.clone()),
+        RosValue::IntegerArray(a) => ParamValue::IntegerArray(a.clone()),
+        RosValue::DoubleArray(a) => ParamValue::DoubleArray(a.clone()),
+        RosValue::StringArray(a) => ParamValue::StringArray(a.clone()),
+        RosValue::NotSet | RosValue::ByteArray(_) => return None,
+    })
+}
+
+fn type_name(full: &str) -> Result<MessageTypeName, HostError> {
+    let mut it = full.split('/');
+    match (it.next(), it.next(), it.next()) {
+        (Some(pkg), Some("msg"), Some(t)) => Ok(MessageTypeName::new(pkg, t)),
+        _ => Err(HostError::Dds(format!("bad type name {full}"))),
+    }
+}
+
+fn topic_name(full: &str) -> Result<Name, HostError> {
+    Name::parse(full).map_err(|e| HostError::Dds(format!("topic name {full}: {e}")))
+}
+
+/// A typed publisher for one output.
+enum Pub {
+    Image(ros2_client::Publisher<Image>),
+    CameraInfo(ros2_client::Publisher<CameraInfo>),
+    Tf(ros2_client::Publisher<TFMessage>),
+    LaserLine(ros2_client::Publisher<LaserLine>),
+    Cloud(ros2_client::Publisher<PointCloud2>),
+    Marker(ros2_client::Publisher<Marker>),
+    ScanEvent(ros2_client::Publisher<ScanEvent>),
+    JointState(ros2_client::Publisher<JointState>),
+    Clock(ros2_client::Publisher<Clock>),
+}
+
+impl Pub {
+    fn publish(&self, m: &Msg) -> Result<(), String> {
+        let r = match (self, m) {
+            (Pub::Image(p), Msg::Image(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
+            (Pub::CameraInfo(p), Msg::CameraInfo(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
+            (Pub::Tf(p), Msg::Tf(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
+            (Pub::LaserLine(p), Msg::LaserLine(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
+            (Pub::Cloud(p), Msg::Cloud(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
+            (Pub::Marker(p), Msg::Marker(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
+            (Pub::ScanEvent(p), Msg::ScanEvent(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
+            (Pub::JointState(p), Msg::JointState(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
+            (Pub::Clock(p), Msg::Clock(m)) => p.publish(**m).map_err(|e| format!("{e:?}")),
+            (_, m) => Err(format!("a {} does not fit this publisher", m.type_name())),
+        };
+        r
+    }
+}
+
+/// What the reader threads send to the node's loop.
+enum Event {
+    Message(usize, Msg),
+    Clock(i64),
+    Reconfigure(String, ParamValue),
+}
+
+/// The node's DDS side: publishers by topic name (so other hosts, like bag play, can use it).
+pub struct DdsNode {
+    node: Node,
+    pubs: Vec<(String, Pub)>,
+}
+
+impl DdsNode {
+    /// Creates a publisher on `topic` for `type_name` with the class's QoS.
+    pub fn add_publisher(&mut self, topic: &str, type_name_full: &str, class: QosClass) -> Result<(), HostError> {
+        let t = self
+            .node
+            .create_topic(&topic_name(topic)?, type_name(type_name_full)?, &qos(class))
+            .map_err(|e| HostError::Dds(format!("topic {topic}: {e:?}")))?;
+        let q = Some(qos(class));
+        let err = |e: ros2_client::CreateError| HostError::Dds(format!("publisher {topic}: {e:?}"));
+        let p = match type_name_full {
+            "sensor_msgs/msg/Image" => Pub::Image(self.node.create_publisher(&t, q).map_err(err)?),
+            "sensor_msgs/msg/CameraInfo" => Pub::CameraInfo(self.node.create_publisher(&t, q).map_err(err)?),
+            "tf2_msgs/msg/TFMessage" => Pub::Tf(self.node.create_publisher(&t, q).map_err(err)?),
+            "xsurf_msgs/msg/LaserLine" => Pub::LaserLine(self.node.create_publisher(&t, q).map_err(err)?),
+            "sensor_msgs/msg/PointCloud2" => Pub::Cloud(self.node.create_publisher(&t, q).map_err(err)?),
+            "visualization_msgs/msg/Marker" => Pub::Marker(self.node.create_publisher(&t, q).map_err(err)?),
+            "xsurf_msgs/msg/ScanEvent" => Pub::ScanEvent(self.node.create_publisher(&t, q).map_err(err)?),
+            "sensor_msgs/msg/JointState" => Pub::JointState(self.node.create_publisher(&t, q).map_err(err)?),
+            "rosgraph_msgs/msg/Clock" => Pub::Clock(self.node.create_publisher(&t, q).map_err(err)?),
+            other => return Err(HostError::Dds(format!("no publisher for type {other}"))),
+        };
+        self.pubs.push((topic.to_string(), p));
+        Ok(())
+    }
+
+    /// Publishes on a topic added with [`DdsNode::add_publisher`].
+    pub fn publish(&self, topic: &str, m: &Msg) -> Result<(), String> {
+        let p = self.pubs.iter().find(|(t, _)| t == topic).ok_or_else(|| format!("no publisher on {topic}"))?;
+        p.1.publish(m)
+    }
+
+    /// The ros2-client node.
+    pub fn node(&mut self) -> &mut Node {
+        &mut self.node
+    }
+}
+
+/// Starts a subscription whose messages go to `tx` as input `index`.
+fn subscribe(
+    node: &mut Node,
+    topic: &str,
+    type_full: &str,
+    class: QosClass,
+    index: usize,
+    feed: Feed,
+) -> Result<(), HostError> {
+    let Feed { tx, dropped, stop } = feed;
+    let t = node
+        .create_topic(&topic_name(topic)?, type_name(type_full)?, &qos(class))
+        .map_err(|e| HostError::Dds(format!("topic {topic}: {e:?}")))?;
+    // Subscribers ask for what every matching publisher offers: best effort for camera streams
+    // (matches both kinds of writer), reliable otherwise.
+    let q = Some(qos(class));
+    let topic_s = topic.to_string();
+    macro_rules! spawn_reader {
+        ($ty:ty, $wrap:expr) => {{
+            let sub = node
+                .create_subscription::<$ty>(&t, q)
+                .map_err(|e| HostError::Dds(format!("subscription {topic}: {e:?}")))?;
+            std::thread::Builder::new()
+                .name(format!("sub {topic_s}"))
+                .spawn(move || {
+                    futures::executor::block_on(async {
+                        let mut s = std::pin::pin!(sub.async_stream());
+                        while let Some(r) = s.next().await {
+                            if stop.load(Ordering::Relaxed) {
+                                break;
+                            }
+                            match r {
+                                Ok((m, _info)) => {
+                                    let ev = $wrap(m);
+                                    if class == QosClass::Sensor {
+                                        match tx.try_send(ev) {
+                                            Ok(()) => {}
+                                            Err(TrySendError::Full(_)) => {
+                                                let n = dropped.fetch_add(1, Ordering::Relaxed) + 1;
+                                                if n.is_power_of_two() {
+                                                    log::warn!("{topic_s}: node busy, {n} message(s) dropped so far");
+                                                }
+                                            }
+                                            Err(TrySendError::Disconnected(_)) => break,
+                                        }
+                                    } else if tx.send(ev).is_err() {
+                                        break;
+                                    }
+                                }
+                                Err(e) => log::warn!("{topic_s}: read error {e:?}"),
+                            }
+                        }
+                    })
+                })
+                .map_err(|e| HostError::Dds(format!("thread: {e}")))?;
+        }};
+    }
+    match type_full {
+        "sensor_msgs/msg/Image" => spawn_reader!(Image, |m| Event::Message(index, Msg::Image(Arc::new(m)))),
+        "sensor_msgs/msg/CameraInfo" => {
+            spawn_reader!(CameraInfo, |m| Event::Message(index, Msg::CameraInfo(Arc::new(m))))
+        }
+        "tf2_msgs/msg/TFMessage" => spawn_reader!(TFMessage, |m| Event::Message(index, Msg::Tf(Arc::new(m)))),
+        "xsurf_msgs/msg/LaserLine" => spawn_reader!(LaserLine, |m| Event::Message(index, Msg::LaserLine(Arc::new(m)))),
+        "sensor_msgs/msg/PointCloud2" => spawn_reader!(PointCloud2, |m| Event::Message(index, Msg::Cloud(Arc::new(m)))),
+        "visualization_msgs/msg/Marker" => spawn_reader!(Marker, |m| Event::Message(index, Msg::Marker(Arc::new(m)))),
+        "xsurf_msgs/msg/ScanEvent" => spawn_reader!(ScanEvent, |m| Event::Message(index, Msg::ScanEvent(Arc::new(m)))),
+        "sensor_msgs/msg/JointState" => {
+            spawn_reader!(JointState, |m| Event::Message(index, Msg::JointState(Arc::new(m))))
+        }
+        "rosgraph_msgs/msg/Clock" => spawn_reader!(Clock, |m: Clock| Event::Clock(m.clock.nanos())),
+        other => return Err(HostError::Dds(format!("no subscription for type {other}"))),
+    }
+    Ok(())
+}
+
+/// Checks a full set of parameter values (the component's own config conversion).
+pub type Validator = Arc<dyn Fn(&Params) -> Result<(), String> + Send + Sync>;
+
+/// Where a subscription's reader thread delivers.
+#[derive(Clone)]
+struct Feed {
+    tx: SyncSender<Event>,
+    dropped: Arc<AtomicU64>,
+    stop: Arc<AtomicBool>,
+}
+
+/// Everything needed to host a component.
+pub struct HostConfig {
+    /// Node name.
+    pub name: String,
+    /// Namespace.
+    pub namespace: String,
+    /// Remapping rules.
+    pub remaps: Vec<Remap>,
+    /// Declarations (for the parameter services).
+    pub decls: Vec<ParamDecl>,
+    /// Resolved parameter values.
+    pub params: Params,
+    /// Validates a full set of values (the component's own config conversion).
+    pub validate: Validator,
+    /// Publish log records on `/rosout`.
+    pub rosout: bool,
+    /// How often `tick` runs.
+    pub tick_period: Duration,
+}
+
+/// Creates the node (parameters declared, services on, `/rosout`) in `ctx`.
+pub fn create_node(
+    ctx: &Context,
+    cfg: &HostConfig,
+    tx: Option<SyncSender<(String, ParamValue)>>,
+) -> Result<DdsNode, HostError> {
+    let mut opts =
+        NodeOptions::new().enable_rosout(cfg.rosout).start_parameter_services(true).allow_undeclared_parameters(false);
+    let mut declared: Vec<String> = Vec::new();
+    for d in &cfg.decls {
+        let v = cfg.params.get(d.name).unwrap_or(&d.default);
+        opts = opts.declare_parameter(d.name, to_ros(v));
+        declared.push(d.name.to_string());
+    }
+    let use_sim = cfg.params.get("use_sim_time").cloned().unwrap_or(ParamValue::Bool(false));
+    if !declared.iter().any(|d| d == "use_sim_time") {
+        opts = opts.declare_parameter("use_sim_time", to_ros(&use_sim));
+    }
+    let shared = Arc::new(Mutex::new(cfg.params.clone()));
+    let decls = cfg.decls.clone();
+    let validate = cfg.validate.clone();
+    let v_shared = shared.clone();
+    let set_decls = cfg.decls.clone();
+    opts = opts.parameter_validator(Box::new(move |name, value| {
+        if name == "use_sim_time" {
+            return Err("use_sim_time is read at start-up; restart the node to change it".into());
+        }
+        let v = from_ros(value).ok_or_else(|| format!("parameter {name}: unsupported value {value:?}"))?;
+        let mut p = v_shared.lock().map_err(|_| "parameter store poisoned".to_string())?.clone();
+        p.set(&decls, name, v).map_err(|e| e.to_string())?;
+        validate(&p)
+    }));
+    opts = opts.parameter_set_action(Box::new(move |name, value| {
+        if let (Some(v), Some(tx)) = (from_ros(value), tx.as_ref()) {
+            if let Ok(mut p) = shared.lock() {
+                // Validated just before by the validator; keep the store in step for the next one.
+                let _ = p.set(&set_decls, name, v.clone());
+            }
+            let _ = tx.try_send((name.to_string(), v));
+        }
+        Ok(())
+    }));
+    let node_name = NodeName::new(&cfg.namespace, &cfg.name)
+        .map_err(|e| HostError::Dds(format!("node name {}/{}: {e:?}", cfg.namespace, cfg.name)))?;
+    let node = ctx.new_node(node_name, opts).map_err(|e| HostError::Dds(format!("node: {e:?}")))?;
+    Ok(DdsNode { node, pubs: Vec::new() })
+}
+
+/// Runs `component` as a node until SIGINT/SIGTERM. Returns the number of refused messages.
+pub fn run(env: &DdsEnv, cfg: HostConfig, mut component: Box<dyn Component>) -> Result<u64, HostError> {
+    let ctx = env.context()?;
+    let (ptx, prx) = sync_channel::<(String, ParamValue)>(16);
+    let mut dn = create_node(&ctx, &cfg, Some(ptx))?;
+    if cfg.rosout {
+        let h = dn.node.logging_handle();
+        let name = crate::rosargs::fq_name(&cfg.namespace, &cfg.name).trim_start_matches('/').replace('/', ".");
+        crate::logging::set_rosout(Box::new(move |level, _target, msg| {
+            use ros2_client::rosout::RosoutRaw;
+            let lvl = match level {
+                log::Level::Error => ros2_client::log::LogLevel::Error,
+                log::Level::Warn => ros2_client::log::LogLevel::Warn,
+                log::Level::Info => ros2_client::log::LogLevel::Info,
+                _ => ros2_client::log::LogLevel::Debug,
+            };
+            h.rosout_raw(ros2_client::builtin_interfaces::Time::now(), lvl, &name, msg, "", "", 0);
+        }));
+    }
+    component.set_identity(&cfg.name, &cfg.namespace);
+    let stop = Arc::new(AtomicBool::new(false));
+    let (tx, rx) = sync_channel::<Event>(QUEUE_DEPTH);
+    let dropped = Arc::new(AtomicU64::new(0));
+    let feed = Feed { tx: tx.clone(), dropped: dropped.clone(), stop: stop.clone() };
+    for (i, p) in component.inputs().into_iter().enumerate() {
+        let topic = resolve_topic(&p.topic, &cfg.namespace, &cfg.name, &cfg.remaps);
+        subscribe(dn.node(), &topic, p.type_name, p.qos, i, feed.clone())?;
+        log::info!("{}: subscribed {topic} ({})", cfg.name, p.type_name);
+    }
+    let sim_time = matches!(cfg.params.get("use_sim_time"), Some(ParamValue::Bool(true)));
+    if sim_time {
+        subscribe(dn.node(), "/clock", "rosgraph_msgs/msg/Clock", QosClass::Reliable, usize::MAX, feed.clone())?;
+    }
+    let mut outputs = Vec::new();
+    for p in component.outputs() {
+        let topic = resolve_topic(&p.topic, &cfg.namespace, &cfg.name, &cfg.remaps);
+        dn.add_publisher(&topic, p.type_name, p.qos)?;
+        log::info!("{}: publishes {topic} ({})", cfg.name, p.type_name);
+        outputs.push(topic);
+    }
+    // Parameter set actions arrive on their own channel; forward them into the loop.
+    {
+        let tx = tx.clone();
+        std::thread::spawn(move || {
+            while let Ok((n, v)) = prx.recv() {
+                if tx.send(Event::Reconfigure(n, v)).is_err() {
+                    break;
+                }
+            }
+        });
+    }
+    drop(tx);
+    drop(feed);
+    let spinner = dn.node.spinner().map_err(|e| HostError::Dds(format!("spinner: {e:?}")))?;
+    std::thread::Builder::new()
+        .name("spinner".into())
+        .spawn(move || {
+            if let Err(e) = futures::executor::block_on(spinner.spin()) {
+                log::error!("parameter services stopped: {e:?}");
+            }
+        })
+        .map_err(|e| HostError::Dds(format!("thread: {e}")))?;
+    {
+        let stop = stop.clone();
+        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
+            .map_err(|e| HostError::Dds(format!("signal handler: {e}")))?;
+    }
+    let mut params = cfg.params.clone();
+    let mut errors = 0u64;
+    let mut clock_ns: Option<i64> = None;
+    let mut last_tick = Instant::now();
+    let publish_out = |out: Outbox, errors: &mut u64| {
+        for (port, m) in out.items {
+            match outputs.get(port) {
+                Some(topic) => {
+                    if let Err(e) = dn.publish(topic, &m) {
+                        *errors += 1;
+                        log::warn!("{}: publish on {topic} failed: {e}", cfg.name);
+                    }
+                }
+                None => log::error!("{}: output {port} is not declared", cfg.name),
+            }
+        }
+    };
+    let now_ns = |clock: Option<i64>| -> i64 {
+        if sim_time {
+            clock.unwrap_or(0)
+        } else {
+            std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as i64)
+        }
+    };
+    log::info!(
+        "{}/{} running (domain {}, {})",
+        cfg.namespace.trim_end_matches('/'),
+        cfg.name,
+        env.domain_id,
+        if env.localhost_only { "localhost only" } else { "all interfaces" }
+    );
+    while !stop.load(Ordering::SeqCst) {
+        match rx.recv_timeout(cfg.tick_period) {
+            Ok(Event::Message(i, m)) => {
+                let mut out = Outbox::default();
+                if let Err(e) = component.handle(i, &m, &mut out) {
+                    errors += 1;
+                    if errors <= 5 || errors.is_power_of_two() {
+                        log::warn!("{}: message refused ({errors} so far): {e}", cfg.name);
+                    }
+                }
+                publish_out(out, &mut errors);
+            }
+            Ok(Event::Clock(t)) => clock_ns = Some(t),
+            Ok(Event::Reconfigure(name, v)) => {
+                if params.set(&cfg.decls, &name, v).is_ok() {
+                    match component.reconfigure(&params) {
+                        Ok(()) => log::info!("{}: parameter {name} set", cfg.name),
+                        Err(e) => log::warn!("{}: parameter {name} refused: {e}", cfg.name),
+                    }
+                }
+            }
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => break,
+        }
+        if last_tick.elapsed() >= cfg.tick_period {
+            last_tick = Instant::now();
+            let mut out = Outbox::default();
+            component.tick(now_ns(clock_ns), &mut out);
+            publish_out(out, &mut errors);
+        }
+    }
+    log::info!("{}: shutting down", cfg.name);
+    stop.store(true, Ordering::SeqCst);
+    let mut out = Outbox::default();
+    component.finish(&mut out);
+    publish_out(out, &mut errors);
+    let d = dropped.load(Ordering::Relaxed);
+    if d > 0 {
+        log::warn!("{}: {d} camera message(s) dropped while the node was busy", cfg.name);
+    }
+    for (k, v) in component.counters() {
+        log::info!("{}: {k} = {v}", cfg.name);
+    }
+    // Give reliable writers a moment to deliver the last output, then leave the graph.
+    std::thread::sleep(Duration::from_millis(200));
+    dn.node.stop_spinner();
+    drop(dn);
+    drop(ctx);
+    Ok(errors)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ros_environment() {
+        let env = |pairs: &'static [(&'static str, &'static str)]| {
+            move |k: &str| pairs.iter().find(|p| p.0 == k).map(|p| p.1.to_string())
+        };
+        assert_eq!(DdsEnv::from_env(env(&[])).unwrap(), DdsEnv { domain_id: 0, localhost_only: false });
+        assert_eq!(
+            DdsEnv::from_env(env(&[("ROS_DOMAIN_ID", "42"), ("ROS_LOCALHOST_ONLY", "1")])).unwrap(),
+            DdsEnv { domain_id: 42, localhost_only: true }
+        );
+        assert!(DdsEnv::from_env(env(&[("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")])).unwrap().localhost_only);
+        assert!(DdsEnv::from_env(env(&[("ROS_DOMAIN_ID", "300")])).is_err());
+        assert!(DdsEnv::from_env(env(&[("ROS_DOMAIN_ID", "x")])).unwrap_err().to_string().contains("ROS_DOMAIN_ID"));
+    }
+
+    #[test]
+    fn parameter_values_convert_both_ways() {
+        for v in [
+            ParamValue::Bool(true),
+            ParamValue::Integer(3),
+            ParamValue::Double(0.5),
+            ParamValue::String("a".into()),
+            ParamValue::DoubleArray(vec![1.0]),
+            ParamValue::StringArray(vec!["x".into()]),
+        ] {
+            assert_eq!(from_ros(&to_ros(&v)), Some(v));
+        }
+    }
+}

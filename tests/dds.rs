@@ -1,0 +1,69 @@
+//! Our nodes over DDS, as separate processes inside a private network namespace
+//! (`../shared/tools/netns-run`): `edge_detector` and `triangulator` in /cam1 with a params file
+//! and a remap, fed by `xsurf bag play`; an independent DDS implementation (Python `cyclonedds`)
+//! subscribes their PointCloud2 and the TFMessages, and publishes an Image that our
+//! `edge_detector` answers. The points that crossed DDS are checked against the ground truth.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+use common::*;
+use std::process::Command;
+use xsurf_core::eval;
+
+#[test]
+fn nodes_exchange_images_and_clouds_with_an_independent_dds_peer() {
+    let Some(py) = python() else { return };
+    let netns = root().join("../shared/tools/netns-run");
+    assert!(netns.is_file(), "{} is needed to keep DDS on this machine", netns.display());
+    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
+    let out = scratch("dds");
+    // A params file in the ROS 2 format: the laser plane for every node, a method for cam1.
+    let params = out.join("params.yaml");
+    std::fs::write(&params, "/**:\n  ros__parameters:\n    laser_plane: [0.0, 1.0, 0.0, 0.0]\n/cam1/edge_detector:\n  ros__parameters:\n    method: gaussian\n").unwrap();
+    let run = Command::new(&netns)
+        .arg(&py)
+        .arg(root().join("tests/py/dds_graph.py"))
+        .arg(bin_dir)
+        .arg(pyramid_bag())
+        .arg(&params)
+        .arg(out.join("run"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "dds_graph.py failed:\n{stdout}\n{}", String::from_utf8_lossy(&run.stderr));
+    let s: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    // Every frame's profile arrived, well formed, in table.
+    assert_eq!(s["clouds"], 78, "{s}");
+    assert_eq!(s["cloud_errors"], serde_json::json!([]), "{s}");
+    assert!(s["tf"].as_u64().unwrap() >= 270, "{s}");
+    assert_eq!(s["tf_frames"], serde_json::json!(["table->carm"]));
+    // The image Cyclone DDS published was seen by our edge_detector (line at column 30.25).
+    let lines = s["lines"].as_array().unwrap();
+    assert!(!lines.is_empty(), "no LaserLine from /cam9/edge_detector: {s}");
+    for l in lines {
+        assert_eq!(l["found"], 8);
+        assert!((l["mean_u"].as_f64().unwrap() - 30.25).abs() < 0.05, "{l}");
+        assert_eq!(l["frame_id"], "cam9_optical_frame");
+    }
+    assert_eq!(s["player_exit"], 0);
+    assert_eq!(s["node_exits"], serde_json::json!([0, 0, 0]), "nodes leave cleanly on SIGTERM");
+    // The params file reached the right node only.
+    let log1 = std::fs::read_to_string(out.join("run/edge_detector_cam1.log")).unwrap();
+    assert!(log1.contains("/cam1/edge_detector: parameter method = gaussian"), "{log1}");
+    let log9 = std::fs::read_to_string(out.join("run/edge_detector_cam9.log")).unwrap();
+    assert!(!log9.contains("method = gaussian") && log9.contains("parameter min_strength = 30"), "{log9}");
+    // The points that crossed DDS against the truth.
+    let raw = std::fs::read(out.join("run/points.f32")).unwrap();
+    let pts: Vec<[f32; 3]> = raw
+        .chunks_exact(12)
+        .map(|c| {
+            let f = |k: usize| f32::from_le_bytes([c[k], c[k + 1], c[k + 2], c[k + 3]]);
+            [f(0), f(4), f(8)]
+        })
+        .collect();
+    let scene = xsurf_core::synth::Scene::by_name("pyramid").unwrap();
+    let acc = eval::accuracy(eval::surface_errors(&scene, &pts));
+    assert!(acc.points > 15_000, "{acc:?}");
+    assert!(acc.rms_m < 0.001 && acc.outlier_fraction_2mm < 0.005, "{acc:?}");
+    std::fs::remove_dir_all(&out).unwrap();
+}
