@@ -45,6 +45,30 @@ fn nodes_exchange_images_and_clouds_with_an_independent_dds_peer() {
         assert!((l["mean_u"].as_f64().unwrap() - 30.25).abs() < 0.05, "{l}");
         assert_eq!(l["frame_id"], "cam9_optical_frame");
     }
+    // Parameter services: list, get, a refused set with the reason, a valid set that changes behaviour.
+    let p = &s["param"];
+    assert_eq!(p["list"]["code"], 0, "{p}");
+    for name in ["method", "min_strength", "roi.x_offset", "line_orientation", "use_sim_time"] {
+        assert!(p["list"]["out"].as_str().unwrap().contains(name), "{name} not listed: {p}");
+    }
+    assert_eq!(p["get"]["out"], "double value is: 30.0", "{p}");
+    assert_ne!(p["set_bad_method"]["code"], 0);
+    assert!(p["set_bad_method"]["out"].as_str().unwrap().contains("unknown method \"bogus\""), "{p}");
+    assert_ne!(p["set_bad_type"]["code"], 0);
+    assert!(
+        p["set_bad_type"]["out"]
+            .as_str()
+            .unwrap()
+            .contains("Cannot change type of parameter 'min_strength' from Double to String"),
+        "{p}"
+    );
+    assert_eq!(p["set_high_threshold"]["code"], 0, "{p}");
+    assert_eq!(p["get_after"]["out"], "double value is: 250.0", "{p}");
+    let after = s["lines_after_set"].as_array().unwrap();
+    assert!(
+        !after.is_empty() && after.iter().all(|l| l["found"] == 0),
+        "a 200-level line must fall below min_strength 250: {s}"
+    );
     assert_eq!(s["player_exit"], 0);
     assert_eq!(s["node_exits"], serde_json::json!([0, 0, 0]), "nodes leave cleanly on SIGTERM");
     // The params file reached the right node only.

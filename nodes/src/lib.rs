@@ -9,6 +9,7 @@ pub mod components;
 pub mod convert;
 pub mod host;
 pub mod offline;
+pub mod param_client;
 pub mod play;
 pub mod synth;
 pub mod tf;

@@ -1,6 +1,6 @@
 //! A small `log` backend: `[LEVEL] [logger]: message` on stderr, with a global level and
-//! per-logger levels (the ROS 2 `--log-level` forms). RustDDS' per-datagram warnings are
-//! quiet unless asked for.
+//! per-logger levels (the ROS 2 `--log-level` forms). RustDDS' per-datagram warnings and
+//! ros2-client's informational chatter are quiet unless asked for by logger name.
 
 use std::sync::{Mutex, OnceLock};
 
@@ -31,7 +31,13 @@ impl log::Log for Logger {
             .filter(|(name, _)| target.starts_with(name.as_str()))
             .max_by_key(|(name, _)| name.len())
             .map(|(_, l)| *l)
-            .unwrap_or(if target.starts_with("rustdds") { log::LevelFilter::Error } else { self.level });
+            .unwrap_or(if target.starts_with("rustdds") {
+                log::LevelFilter::Error
+            } else if target.starts_with("ros2_client") {
+                self.level.min(log::LevelFilter::Warn)
+            } else {
+                self.level
+            });
         m.level() <= level
     }
     fn log(&self, r: &log::Record<'_>) {

@@ -102,6 +102,29 @@ def main(bin_dir, bag, params, out):
                                  height=h, width=w, encoding="mono8", is_bigendian=0, step=w, data=data))
         time.sleep(0.2)
         drain()
+    # Parameter services, as `ros2 param` uses them.
+    def param(*args):
+        r = subprocess.run([str(bin_dir / "xsurf"), "param", *args], capture_output=True, text=True, env=env, timeout=60)
+        return {"code": r.returncode, "out": r.stdout.strip(), "err": r.stderr.strip()}
+    summary["param"] = {
+        "list": param("list", "/cam9/edge_detector"),
+        "get": param("get", "/cam9/edge_detector", "min_strength"),
+        "set_bad_method": param("set", "/cam9/edge_detector", "method", "bogus"),
+        "set_bad_type": param("set", "/cam9/edge_detector", "min_strength", "loud"),
+        "set_high_threshold": param("set", "/cam9/edge_detector", "min_strength", "250.0"),
+        "get_after": param("get", "/cam9/edge_detector", "min_strength"),
+    }
+    # With the threshold above the line's height, the same image now gives no line.
+    time.sleep(0.5)
+    drain()
+    before = len(summary["lines"])
+    for k in range(3):
+        image_writer.write(Image(header=Header(stamp=Time(sec=200, nanosec=k), frame_id="cam9_optical_frame"),
+                                 height=h, width=w, encoding="mono8", is_bigendian=0, step=w, data=data))
+        time.sleep(0.2)
+        drain()
+    summary["lines_after_set"] = summary["lines"][before:]
+    summary["lines"] = summary["lines"][:before]
     player = start("bag_play", "xsurf", "bag", "play", bag, "--delay", "1.0",
                    "--topics", "/cam1/image_raw,/cam1/camera_info,/tf,/tf_static")
     deadline = time.time() + 120

@@ -6,8 +6,9 @@
 //! xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
 //! xsurf bag info DIR
 //! xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
+//! xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
 //! ```
-//! Only `bag play` opens a DDS participant.
+//! Only `bag play` and `param` open a DDS participant.
 
 use anyhow::{anyhow, bail, Context};
 use std::path::{Path, PathBuf};
@@ -28,7 +29,9 @@ const USAGE: &str = "usage:
   xsurf bag info DIR
       summarize a bag, like `ros2 bag info`
   xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
-      publish a bag over DDS with its original timing (honours ROS_DOMAIN_ID, ROS_LOCALHOST_ONLY)";
+      publish a bag over DDS with its original timing (honours ROS_DOMAIN_ID, ROS_LOCALHOST_ONLY)
+  xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
+      a node's parameters through the standard ROS 2 parameter services (like `ros2 param`)";
 
 /// A command-line mistake: exit code 2.
 #[derive(Debug)]
@@ -300,6 +303,7 @@ fn main() -> ExitCode {
         Some("synth") => cmd_synth(&args[1..]),
         Some("reconstruct") => cmd_reconstruct(&args[1..]),
         Some("bag") => cmd_bag(&args[1..]),
+        Some("param") => xsurf_nodes::param_client::run(&args[1..]),
         Some("-h" | "--help" | "help") => {
             println!("{USAGE}");
             Ok(())
