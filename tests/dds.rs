@@ -12,11 +12,20 @@ use xsurf_core::eval;
 
 #[test]
 fn nodes_exchange_images_and_clouds_with_an_independent_dds_peer() {
+    graph("separate", "edge_detector_cam1.log", "[0, 0, 0]");
+}
+
+#[test]
+fn composed_nodes_pass_messages_in_memory_and_still_publish_on_dds() {
+    graph("composed", "compose.log", "[0, 0]");
+}
+
+fn graph(mode: &str, cam1_log: &str, exits: &str) {
     let Some(py) = python() else { return };
     let netns = root().join("../shared/tools/netns-run");
     assert!(netns.is_file(), "{} is needed to keep DDS on this machine", netns.display());
     let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
-    let out = scratch("dds");
+    let out = scratch(&format!("dds-{mode}"));
     // A params file in the ROS 2 format: the laser plane for every node, a method for cam1.
     let params = out.join("params.yaml");
     std::fs::write(&params, "/**:\n  ros__parameters:\n    laser_plane: [0.0, 1.0, 0.0, 0.0]\n/cam1/edge_detector:\n  ros__parameters:\n    method: gaussian\n").unwrap();
@@ -27,6 +36,7 @@ fn nodes_exchange_images_and_clouds_with_an_independent_dds_peer() {
         .arg(pyramid_bag())
         .arg(&params)
         .arg(out.join("run"))
+        .arg(mode)
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&run.stdout);
@@ -70,9 +80,10 @@ fn nodes_exchange_images_and_clouds_with_an_independent_dds_peer() {
         "a 200-level line must fall below min_strength 250: {s}"
     );
     assert_eq!(s["player_exit"], 0);
-    assert_eq!(s["node_exits"], serde_json::json!([0, 0, 0]), "nodes leave cleanly on SIGTERM");
+    assert_eq!(s["node_exits"].to_string().replace(',', ", "), exits, "nodes leave cleanly on SIGTERM");
+    assert!(s["cam1_lines"].as_u64().unwrap() >= 70, "/cam1/laser_line is visible on DDS: {s}");
     // The params file reached the right node only.
-    let log1 = std::fs::read_to_string(out.join("run/edge_detector_cam1.log")).unwrap();
+    let log1 = std::fs::read_to_string(out.join("run").join(cam1_log)).unwrap();
     assert!(log1.contains("/cam1/edge_detector: parameter method = gaussian"), "{log1}");
     let log9 = std::fs::read_to_string(out.join("run/edge_detector_cam9.log")).unwrap();
     assert!(!log9.contains("method = gaussian") && log9.contains("parameter min_strength = 30"), "{log9}");
@@ -90,4 +101,45 @@ fn nodes_exchange_images_and_clouds_with_an_independent_dds_peer() {
     assert!(acc.points > 15_000, "{acc:?}");
     assert!(acc.rms_m < 0.001 && acc.outlier_fraction_2mm < 0.005, "{acc:?}");
     std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// Malformed command lines, parameters and environment stop a node before it opens DDS:
+/// exit code 2 and one line naming the problem.
+#[test]
+fn node_executables_refuse_bad_input_with_exit_2() {
+    let run = |bin: &str, args: &[&str], env: &[(&str, &str)]| {
+        let mut c = Command::new(bin);
+        c.args(args);
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        c.output().unwrap()
+    };
+    let ed = env!("CARGO_BIN_EXE_edge_detector");
+    assert_clean_failure(&run(ed, &["--ros-args", "--bogus"], &[]), 2, "unknown ROS argument \"--bogus\"");
+    assert_clean_failure(
+        &run(ed, &["--ros-args", "-p", "method:=nope"], &[]),
+        2,
+        "/edge_detector: parameter method: unknown method \"nope\"",
+    );
+    assert_clean_failure(
+        &run(ed, &["--ros-args", "-p", "min_strength:=high"], &[]),
+        2,
+        "parameter min_strength: expected double, got string",
+    );
+    assert_clean_failure(
+        &run(ed, &["--ros-args", "-p", "qos.sensor.reliability:=sometimes"], &[]),
+        2,
+        "qos.sensor.reliability",
+    );
+    assert_clean_failure(&run(ed, &["stray"], &[]), 2, "unexpected arguments");
+    let tr = env!("CARGO_BIN_EXE_triangulator");
+    assert_clean_failure(
+        &run(tr, &["--ros-args", "--params-file", "/nonexistent/p.yaml"], &[]),
+        2,
+        "params file /nonexistent/p.yaml",
+    );
+    assert_clean_failure(&run(tr, &["--ros-args", "-p", "laser_plane:=[0, 0, 0, 1]"], &[]), 2, "laser_plane");
+    assert_clean_failure(&run(tr, &[], &[("ROS_DOMAIN_ID", "999")]), 2, "ROS_DOMAIN_ID=\"999\"");
+    assert_clean_failure(&xsurf(&["compose", "/cam1/teapot"]), 2, "unknown node type \"teapot\"");
 }

@@ -1,5 +1,6 @@
-//! The `main` of every node executable: parse the ROS 2 command line, resolve the parameters
-//! for the node's fully qualified name, build the component, host it over DDS.
+//! The `main` of every node executable, and `xsurf compose`: parse the ROS 2 command line,
+//! resolve the parameters for each node's fully qualified name, build the components, host
+//! them over DDS (alone, or several in one process connected in memory).
 //!
 //! Exit codes: 0 after a clean shutdown (SIGINT/SIGTERM), 1 when DDS fails, 2 for a malformed
 //! command line, params file, parameter value or environment variable.
@@ -8,64 +9,35 @@ use crate::components;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Duration;
-use xsurf_runtime::dds::{self, DdsEnv, HostConfig};
+use xsurf_runtime::component::Component;
+use xsurf_runtime::dds::{self, DdsEnv, HostConfig, QosTable};
 use xsurf_runtime::params::Params;
 use xsurf_runtime::rosargs::{fq_name, RosArgs};
 
-/// Runs the node `node` (one of [`components::NODE_NAMES`]) with this process's arguments.
-pub fn main(node: &'static str) -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let ros = match RosArgs::parse(&args) {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("{node}: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    xsurf_runtime::logging::init(ros.log_level.unwrap_or(log::LevelFilter::Info), ros.logger_levels.clone());
-    if !ros.user_args.is_empty() {
-        eprintln!("{node}: unexpected arguments {:?} (ROS arguments go after --ros-args)", ros.user_args);
-        return ExitCode::from(2);
-    }
-    let (name, ns) = ros.node_identity(node, "/");
-    let fq = fq_name(&ns, &name);
-    let Some(decls) = components::declarations(node) else {
-        eprintln!("{node}: this node has no component yet");
-        return ExitCode::from(2);
-    };
-    let params = match ros
-        .param_overrides(&fq)
-        .map_err(|e| e.to_string())
-        .and_then(|o| Params::resolve(&decls, &o).map_err(|e| e.to_string()))
-    {
-        Ok(p) => p,
-        Err(e) => {
-            eprintln!("{fq}: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    let component = match components::build(node, &params) {
-        Ok(c) => c,
-        Err(e) => {
-            eprintln!("{fq}: {e}");
-            return ExitCode::from(2);
-        }
-    };
+/// Builds the component `node` (a node type of [`components::NODE_NAMES`]) placed as
+/// `namespace/name`, with its parameters resolved from `ros`.
+pub fn node_config(
+    node: &'static str,
+    name: &str,
+    namespace: &str,
+    ros: &RosArgs,
+) -> Result<(HostConfig, Box<dyn Component>), String> {
+    let fq = fq_name(namespace, name);
+    let mut decls =
+        components::declarations(node).ok_or_else(|| format!("{fq}: node type {node} has no component yet"))?;
+    decls.extend(dds::host_declarations());
+    let overrides = ros.param_overrides(&fq).map_err(|e| e.to_string())?;
+    let params = Params::resolve(&decls, &overrides).map_err(|e| format!("{fq}: {e}"))?;
+    QosTable::from_params(&params).map_err(|e| format!("{fq}: {e}"))?;
+    let component = components::build(node, &params).map_err(|e| format!("{fq}: {e}"))?;
     for d in &decls {
         if let Some(v) = params.get(d.name).filter(|v| **v != d.default) {
             log::info!("{fq}: parameter {} = {v}", d.name);
         }
     }
-    let env = match DdsEnv::from_env(|k| std::env::var(k).ok()) {
-        Ok(e) => e,
-        Err(e) => {
-            eprintln!("{fq}: {e}");
-            return ExitCode::from(2);
-        }
-    };
     let cfg = HostConfig {
-        name,
-        namespace: ns,
+        name: name.to_string(),
+        namespace: namespace.to_string(),
         remaps: ros.remaps.clone(),
         decls,
         params,
@@ -73,11 +45,89 @@ pub fn main(node: &'static str) -> ExitCode {
         rosout: ros.rosout_logs.unwrap_or(true),
         tick_period: Duration::from_millis(50),
     };
-    match dds::run(&env, cfg, component) {
+    Ok((cfg, component))
+}
+
+fn parse(who: &str, args: &[String]) -> Result<RosArgs, ExitCode> {
+    match RosArgs::parse(args) {
+        Ok(r) => {
+            xsurf_runtime::logging::init(r.log_level.unwrap_or(log::LevelFilter::Info), r.logger_levels.clone());
+            Ok(r)
+        }
+        Err(e) => {
+            eprintln!("{who}: {e}");
+            Err(ExitCode::from(2))
+        }
+    }
+}
+
+fn host(who: &str, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> ExitCode {
+    let env = match DdsEnv::from_env(|k| std::env::var(k).ok()) {
+        Ok(e) => e,
+        Err(e) => {
+            eprintln!("{who}: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    match dds::run_graph(&env, nodes) {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("{fq}: {e}");
+            eprintln!("{who}: {e}");
             ExitCode::from(1)
         }
     }
+}
+
+/// Runs the node `node` with this process's arguments.
+pub fn main(node: &'static str) -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let ros = match parse(node, &args) {
+        Ok(r) => r,
+        Err(code) => return code,
+    };
+    if !ros.user_args.is_empty() {
+        eprintln!("{node}: unexpected arguments {:?} (ROS arguments go after --ros-args)", ros.user_args);
+        return ExitCode::from(2);
+    }
+    let (name, ns) = ros.node_identity(node, "/");
+    match node_config(node, &name, &ns, &ros) {
+        Ok(n) => host(node, vec![n]),
+        Err(e) => {
+            eprintln!("{e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// `xsurf compose /ns/node_type... [--ros-args ...]`: several nodes in one process, connected
+/// in memory; each node is named by its type and placed in its namespace; parameters come
+/// from the params files and `-p` rules as for separate nodes.
+pub fn compose(args: &[String]) -> ExitCode {
+    let ros = match parse("xsurf compose", args) {
+        Ok(r) => r,
+        Err(code) => return code,
+    };
+    if ros.user_args.is_empty() {
+        eprintln!(
+            "xsurf compose: name the nodes, e.g. xsurf compose /cam1/edge_detector /cam1/triangulator [--ros-args ...]"
+        );
+        return ExitCode::from(2);
+    }
+    let mut nodes = Vec::new();
+    for spec in &ros.user_args {
+        let (ns, ty) = spec.rsplit_once('/').unwrap_or(("", spec));
+        let Some(&node) = components::NODE_NAMES.iter().find(|n| **n == ty) else {
+            eprintln!("xsurf compose: {spec}: unknown node type {ty:?} (known: {})", components::NODE_NAMES.join(", "));
+            return ExitCode::from(2);
+        };
+        let ns = xsurf_runtime::rosargs::normalize_ns(ns);
+        match node_config(node, node, &ns, &ros) {
+            Ok(n) => nodes.push(n),
+            Err(e) => {
+                eprintln!("{e}");
+                return ExitCode::from(2);
+            }
+        }
+    }
+    host("xsurf compose", nodes)
 }

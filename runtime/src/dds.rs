@@ -12,9 +12,9 @@
 //! [`QUEUE_DEPTH`]). When the queue is full, a camera-stream (best-effort) message is dropped and
 //! counted; other messages wait (their publishers are reliable).
 
-use crate::component::{Component, Msg, Outbox, QosClass};
+use crate::component::{Component, Msg, QosClass};
 use crate::params::{ParamDecl, ParamValue, Params};
-use crate::rosargs::{resolve_topic, Remap};
+use crate::rosargs::Remap;
 use futures::StreamExt;
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::qos::{Durability, History, QosProfile, Reliability, WhenFull};
@@ -186,7 +186,7 @@ impl Pub {
 enum Event {
     Message(usize, Msg),
     Clock(i64),
-    Reconfigure(String, ParamValue),
+    Reconfigure(usize, String, ParamValue),
 }
 
 /// The node's DDS side: publishers by topic name (so other hosts, like bag play, can use it).
@@ -198,11 +198,17 @@ pub struct DdsNode {
 impl DdsNode {
     /// Creates a publisher on `topic` for `type_name` with the class's QoS.
     pub fn add_publisher(&mut self, topic: &str, type_name_full: &str, class: QosClass) -> Result<(), HostError> {
+        let p = self.make_publisher(topic, type_name_full, qos(class))?;
+        self.pubs.push((topic.to_string(), p));
+        Ok(())
+    }
+
+    fn make_publisher(&mut self, topic: &str, type_name_full: &str, profile: QosProfile) -> Result<Pub, HostError> {
         let t = self
             .node
-            .create_topic(&topic_name(topic)?, type_name(type_name_full)?, &qos(class))
+            .create_topic(&topic_name(topic)?, type_name(type_name_full)?, &profile)
             .map_err(|e| HostError::Dds(format!("topic {topic}: {e:?}")))?;
-        let q = Some(qos(class));
+        let q = Some(profile);
         let err = |e: ros2_client::CreateError| HostError::Dds(format!("publisher {topic}: {e:?}"));
         let p = match type_name_full {
             "sensor_msgs/msg/Image" => Pub::Image(self.node.create_publisher(&t, q).map_err(err)?),
@@ -216,8 +222,7 @@ impl DdsNode {
             "rosgraph_msgs/msg/Clock" => Pub::Clock(self.node.create_publisher(&t, q).map_err(err)?),
             other => return Err(HostError::Dds(format!("no publisher for type {other}"))),
         };
-        self.pubs.push((topic.to_string(), p));
-        Ok(())
+        Ok(p)
     }
 
     /// Publishes on a topic added with [`DdsNode::add_publisher`].
@@ -237,17 +242,16 @@ fn subscribe(
     node: &mut Node,
     topic: &str,
     type_full: &str,
-    class: QosClass,
+    profile: QosProfile,
+    droppable: bool,
     index: usize,
     feed: Feed,
 ) -> Result<(), HostError> {
     let Feed { tx, dropped, stop } = feed;
     let t = node
-        .create_topic(&topic_name(topic)?, type_name(type_full)?, &qos(class))
+        .create_topic(&topic_name(topic)?, type_name(type_full)?, &profile)
         .map_err(|e| HostError::Dds(format!("topic {topic}: {e:?}")))?;
-    // Subscribers ask for what every matching publisher offers: best effort for camera streams
-    // (matches both kinds of writer), reliable otherwise.
-    let q = Some(qos(class));
+    let q = Some(profile);
     let topic_s = topic.to_string();
     macro_rules! spawn_reader {
         ($ty:ty, $wrap:expr) => {{
@@ -266,7 +270,7 @@ fn subscribe(
                             match r {
                                 Ok((m, _info)) => {
                                     let ev = $wrap(m);
-                                    if class == QosClass::Sensor {
+                                    if droppable {
                                         match tx.try_send(ev) {
                                             Ok(()) => {}
                                             Err(TrySendError::Full(_)) => {
@@ -363,11 +367,12 @@ pub fn create_node(
     let v_shared = shared.clone();
     let set_decls = cfg.decls.clone();
     opts = opts.parameter_validator(Box::new(move |name, value| {
-        if name == "use_sim_time" {
-            return Err("use_sim_time is read at start-up; restart the node to change it".into());
-        }
         let v = from_ros(value).ok_or_else(|| format!("parameter {name}: unsupported value {value:?}"))?;
         let mut p = v_shared.lock().map_err(|_| "parameter store poisoned".to_string())?.clone();
+        // ros2-client also validates the declared values at start-up: those are the current ones.
+        if (name == "use_sim_time" || name.starts_with("qos.")) && p.get(name).is_some_and(|cur| *cur != v) {
+            return Err(format!("{name} is read at start-up; restart the node to change it"));
+        }
         p.set(&decls, name, v).map_err(|e| e.to_string())?;
         validate(&p)
     }));
@@ -387,90 +392,205 @@ pub fn create_node(
     Ok(DdsNode { node, pubs: Vec::new() })
 }
 
-/// Runs `component` as a node until SIGINT/SIGTERM. Returns the number of refused messages.
-pub fn run(env: &DdsEnv, cfg: HostConfig, mut component: Box<dyn Component>) -> Result<u64, HostError> {
-    let ctx = env.context()?;
-    let (ptx, prx) = sync_channel::<(String, ParamValue)>(16);
-    let mut dn = create_node(&ctx, &cfg, Some(ptx))?;
-    if cfg.rosout {
-        let h = dn.node.logging_handle();
-        let name = crate::rosargs::fq_name(&cfg.namespace, &cfg.name).trim_start_matches('/').replace('/', ".");
-        crate::logging::set_rosout(Box::new(move |level, _target, msg| {
-            use ros2_client::rosout::RosoutRaw;
-            let lvl = match level {
-                log::Level::Error => ros2_client::log::LogLevel::Error,
-                log::Level::Warn => ros2_client::log::LogLevel::Warn,
-                log::Level::Info => ros2_client::log::LogLevel::Info,
-                _ => ros2_client::log::LogLevel::Debug,
-            };
-            h.rosout_raw(ros2_client::builtin_interfaces::Time::now(), lvl, &name, msg, "", "", 0);
-        }));
+/// The host's own parameters, declared on every node: QoS by topic class, read at start-up.
+pub fn host_declarations() -> Vec<ParamDecl> {
+    let d = |name, default, unit, description| ParamDecl { name, default, unit, description };
+    vec![
+        d(
+            "qos.sensor.reliability",
+            ParamValue::String("best_effort".into()),
+            "",
+            "camera streams: best_effort or reliable (read at start-up)",
+        ),
+        d("qos.sensor.depth", ParamValue::Integer(5), "messages", "camera streams: history depth (read at start-up)"),
+        d(
+            "qos.reliable.reliability",
+            ParamValue::String("reliable".into()),
+            "",
+            "clouds, meshes, lines, events, /tf: reliable or best_effort (read at start-up)",
+        ),
+        d(
+            "qos.reliable.depth",
+            ParamValue::Integer(10),
+            "messages",
+            "clouds, meshes, lines, events, /tf: history depth (read at start-up)",
+        ),
+    ]
+}
+
+/// QoS per class after the `qos.*` parameters.
+#[derive(Debug, Clone)]
+pub struct QosTable {
+    sensor: QosProfile,
+    reliable: QosProfile,
+}
+
+impl QosTable {
+    /// From a node's parameters (missing values keep the defaults).
+    pub fn from_params(p: &Params) -> Result<QosTable, String> {
+        let class = |prefix: &str, base: QosProfile| -> Result<QosProfile, String> {
+            let mut q = base;
+            if let Some(ParamValue::String(r)) = p.get(&format!("{prefix}.reliability")) {
+                q = match r.as_str() {
+                    "reliable" => {
+                        q.reliability(Reliability::Reliable { when_full: WhenFull::Wait(Duration::from_millis(100)) })
+                    }
+                    "best_effort" => q.reliability(Reliability::BestEffort),
+                    other => {
+                        return Err(format!("parameter {prefix}.reliability: {other:?} is not reliable or best_effort"))
+                    }
+                };
+            }
+            if let Some(ParamValue::Integer(d)) = p.get(&format!("{prefix}.depth")) {
+                if !(1..=1000).contains(d) {
+                    return Err(format!("parameter {prefix}.depth: {d} is not in 1..=1000"));
+                }
+                q = q.history(History::KeepLast { depth: *d as usize });
+            }
+            Ok(q)
+        };
+        Ok(QosTable {
+            sensor: class("qos.sensor", qos(QosClass::Sensor))?,
+            reliable: class("qos.reliable", qos(QosClass::Reliable))?,
+        })
     }
-    component.set_identity(&cfg.name, &cfg.namespace);
+    /// The profile of a class.
+    pub fn get(&self, c: QosClass) -> QosProfile {
+        match c {
+            QosClass::Sensor => self.sensor.clone(),
+            QosClass::Reliable => self.reliable.clone(),
+            QosClass::Static => qos(QosClass::Static),
+        }
+    }
+}
+
+/// Runs one component as a node until SIGINT/SIGTERM. Returns the number of refused messages.
+pub fn run(env: &DdsEnv, cfg: HostConfig, component: Box<dyn Component>) -> Result<u64, HostError> {
+    run_graph(env, vec![(cfg, component)])
+}
+
+/// Runs several components in one process until SIGINT/SIGTERM: connected in memory by the
+/// [`Router`](crate::router::Router), each with its own ROS 2 node (name, parameters, services),
+/// every output also published on DDS for outside observers, and DDS subscriptions only for the
+/// topics no component of the process publishes. Returns the number of refused messages.
+pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> Result<u64, HostError> {
+    let ctx = env.context()?;
     let stop = Arc::new(AtomicBool::new(false));
     let (tx, rx) = sync_channel::<Event>(QUEUE_DEPTH);
     let dropped = Arc::new(AtomicU64::new(0));
     let feed = Feed { tx: tx.clone(), dropped: dropped.clone(), stop: stop.clone() };
-    for (i, p) in component.inputs().into_iter().enumerate() {
-        let topic = resolve_topic(&p.topic, &cfg.namespace, &cfg.name, &cfg.remaps);
-        subscribe(dn.node(), &topic, p.type_name, p.qos, i, feed.clone())?;
-        log::info!("{}: subscribed {topic} ({})", cfg.name, p.type_name);
-    }
-    let sim_time = matches!(cfg.params.get("use_sim_time"), Some(ParamValue::Bool(true)));
-    if sim_time {
-        subscribe(dn.node(), "/clock", "rosgraph_msgs/msg/Clock", QosClass::Reliable, usize::MAX, feed.clone())?;
-    }
-    let mut outputs = Vec::new();
-    for p in component.outputs() {
-        let topic = resolve_topic(&p.topic, &cfg.namespace, &cfg.name, &cfg.remaps);
-        dn.add_publisher(&topic, p.type_name, p.qos)?;
-        log::info!("{}: publishes {topic} ({})", cfg.name, p.type_name);
-        outputs.push(topic);
-    }
-    // Parameter set actions arrive on their own channel; forward them into the loop.
-    {
-        let tx = tx.clone();
+    let mut router = crate::router::Router::new();
+    let mut dds_nodes: Vec<DdsNode> = Vec::new();
+    let mut configs: Vec<(HostConfig, Params)> = Vec::new();
+    let mut sim_time = false;
+    for (i, (cfg, component)) in nodes.into_iter().enumerate() {
+        let (ptx, prx) = sync_channel::<(String, ParamValue)>(16);
+        let dn = create_node(&ctx, &cfg, Some(ptx))?;
+        if cfg.rosout && i == 0 {
+            let h = dn.node.logging_handle();
+            let name = crate::rosargs::fq_name(&cfg.namespace, &cfg.name).trim_start_matches('/').replace('/', ".");
+            crate::logging::set_rosout(Box::new(move |level, _target, msg| {
+                use ros2_client::rosout::RosoutRaw;
+                let lvl = match level {
+                    log::Level::Error => ros2_client::log::LogLevel::Error,
+                    log::Level::Warn => ros2_client::log::LogLevel::Warn,
+                    log::Level::Info => ros2_client::log::LogLevel::Info,
+                    _ => ros2_client::log::LogLevel::Debug,
+                };
+                h.rosout_raw(ros2_client::builtin_interfaces::Time::now(), lvl, &name, msg, "", "", 0);
+            }));
+        }
+        // Parameter set actions of node i, forwarded into the loop.
+        let tx2 = tx.clone();
         std::thread::spawn(move || {
             while let Ok((n, v)) = prx.recv() {
-                if tx.send(Event::Reconfigure(n, v)).is_err() {
+                if tx2.send(Event::Reconfigure(i, n, v)).is_err() {
                     break;
                 }
             }
         });
+        sim_time |= matches!(cfg.params.get("use_sim_time"), Some(ParamValue::Bool(true)));
+        router.add(component, &cfg.name, &cfg.namespace, &cfg.remaps);
+        let params = cfg.params.clone();
+        configs.push((cfg, params));
+        dds_nodes.push(dn);
+    }
+    if dds_nodes.is_empty() {
+        return Err(HostError::Dds("no node to run".into()));
+    }
+    let qos_of = |node: usize| QosTable::from_params(&configs[node].1).map_err(HostError::Dds);
+    // Publishers for every output, on the node that produces it.
+    let mut pubs = Publishers::default();
+    for (ni, n) in router.nodes().iter().enumerate() {
+        let table = qos_of(ni)?;
+        for (p, topic) in &n.outputs {
+            if !pubs.has(topic) {
+                let pb = dds_nodes[ni].make_publisher(topic, p.type_name, table.get(p.qos))?;
+                pubs.0.push((topic.clone(), pb));
+                log::info!("{}: publishes {topic} ({})", n.name, p.type_name);
+            }
+        }
+    }
+    // DDS subscriptions for what comes from outside the process.
+    let externals = router.external_inputs();
+    for (k, (topic, p)) in externals.iter().enumerate() {
+        let ni = router.nodes().iter().position(|n| n.inputs.iter().any(|(_, t)| t == topic)).unwrap_or(0);
+        let table = qos_of(ni)?;
+        subscribe(
+            dds_nodes[ni].node(),
+            topic,
+            p.type_name,
+            table.get(p.qos),
+            p.qos == QosClass::Sensor,
+            k,
+            feed.clone(),
+        )?;
+        log::info!("{}: subscribed {topic} ({})", router.nodes()[ni].name, p.type_name);
+    }
+    if sim_time {
+        subscribe(
+            dds_nodes[0].node(),
+            "/clock",
+            "rosgraph_msgs/msg/Clock",
+            qos(QosClass::Reliable),
+            false,
+            usize::MAX,
+            feed.clone(),
+        )?;
     }
     drop(tx);
     drop(feed);
-    let spinner = dn.node.spinner().map_err(|e| HostError::Dds(format!("spinner: {e:?}")))?;
-    std::thread::Builder::new()
-        .name("spinner".into())
-        .spawn(move || {
-            if let Err(e) = futures::executor::block_on(spinner.spin()) {
-                log::error!("parameter services stopped: {e:?}");
+    let pub_errors = Arc::new(AtomicU64::new(0));
+    {
+        let pub_errors = pub_errors.clone();
+        router.set_tap(Box::new(move |topic, m| {
+            if let Err(e) = pubs.publish(topic, m) {
+                let n = pub_errors.fetch_add(1, Ordering::Relaxed) + 1;
+                if n <= 5 || n.is_power_of_two() {
+                    log::warn!("publish on {topic} failed ({n} so far): {e}");
+                }
             }
-        })
-        .map_err(|e| HostError::Dds(format!("thread: {e}")))?;
+        }));
+    }
+    for dn in &mut dds_nodes {
+        let spinner = dn.node.spinner().map_err(|e| HostError::Dds(format!("spinner: {e:?}")))?;
+        std::thread::Builder::new()
+            .name("spinner".into())
+            .spawn(move || {
+                if let Err(e) = futures::executor::block_on(spinner.spin()) {
+                    log::error!("parameter services stopped: {e:?}");
+                }
+            })
+            .map_err(|e| HostError::Dds(format!("thread: {e}")))?;
+    }
     {
         let stop = stop.clone();
         ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
             .map_err(|e| HostError::Dds(format!("signal handler: {e}")))?;
     }
-    let mut params = cfg.params.clone();
-    let mut errors = 0u64;
+    let tick_period = configs.iter().map(|c| c.0.tick_period).min().unwrap_or(Duration::from_millis(50));
     let mut clock_ns: Option<i64> = None;
     let mut last_tick = Instant::now();
-    let publish_out = |out: Outbox, errors: &mut u64| {
-        for (port, m) in out.items {
-            match outputs.get(port) {
-                Some(topic) => {
-                    if let Err(e) = dn.publish(topic, &m) {
-                        *errors += 1;
-                        log::warn!("{}: publish on {topic} failed: {e}", cfg.name);
-                    }
-                }
-                None => log::error!("{}: output {port} is not declared", cfg.name),
-            }
-        }
-    };
     let now_ns = |clock: Option<i64>| -> i64 {
         if sim_time {
             clock.unwrap_or(0)
@@ -479,28 +599,23 @@ pub fn run(env: &DdsEnv, cfg: HostConfig, mut component: Box<dyn Component>) -> 
         }
     };
     log::info!(
-        "{}/{} running (domain {}, {})",
-        cfg.namespace.trim_end_matches('/'),
-        cfg.name,
+        "{} node(s) running (domain {}, {})",
+        router.nodes().len(),
         env.domain_id,
         if env.localhost_only { "localhost only" } else { "all interfaces" }
     );
     while !stop.load(Ordering::SeqCst) {
-        match rx.recv_timeout(cfg.tick_period) {
-            Ok(Event::Message(i, m)) => {
-                let mut out = Outbox::default();
-                if let Err(e) = component.handle(i, &m, &mut out) {
-                    errors += 1;
-                    if errors <= 5 || errors.is_power_of_two() {
-                        log::warn!("{}: message refused ({errors} so far): {e}", cfg.name);
-                    }
+        match rx.recv_timeout(tick_period) {
+            Ok(Event::Message(k, m)) => {
+                if let Some((topic, _)) = externals.get(k) {
+                    router.publish(topic, &m);
                 }
-                publish_out(out, &mut errors);
             }
             Ok(Event::Clock(t)) => clock_ns = Some(t),
-            Ok(Event::Reconfigure(name, v)) => {
+            Ok(Event::Reconfigure(ni, name, v)) => {
+                let Some((cfg, params)) = configs.get_mut(ni) else { continue };
                 if params.set(&cfg.decls, &name, v).is_ok() {
-                    match component.reconfigure(&params) {
+                    match router.reconfigure(ni, params) {
                         Ok(()) => log::info!("{}: parameter {name} set", cfg.name),
                         Err(e) => log::warn!("{}: parameter {name} refused: {e}", cfg.name),
                     }
@@ -509,31 +624,56 @@ pub fn run(env: &DdsEnv, cfg: HostConfig, mut component: Box<dyn Component>) -> 
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => break,
         }
-        if last_tick.elapsed() >= cfg.tick_period {
+        if last_tick.elapsed() >= tick_period {
             last_tick = Instant::now();
-            let mut out = Outbox::default();
-            component.tick(now_ns(clock_ns), &mut out);
-            publish_out(out, &mut errors);
+            router.tick(now_ns(clock_ns));
         }
     }
-    log::info!("{}: shutting down", cfg.name);
+    log::info!("shutting down");
     stop.store(true, Ordering::SeqCst);
-    let mut out = Outbox::default();
-    component.finish(&mut out);
-    publish_out(out, &mut errors);
+    router.finish();
     let d = dropped.load(Ordering::Relaxed);
     if d > 0 {
-        log::warn!("{}: {d} camera message(s) dropped while the node was busy", cfg.name);
+        log::warn!("{d} camera message(s) dropped while the node was busy");
     }
-    for (k, v) in component.counters() {
-        log::info!("{}: {k} = {v}", cfg.name);
+    let mut errors = pub_errors.load(Ordering::Relaxed);
+    for n in router.nodes() {
+        errors += n.errors;
+        for (k, v) in n.component.counters() {
+            log::info!("{}: {k} = {v}", n.fq_name());
+        }
+        if n.errors > 0 {
+            log::warn!(
+                "{}: {} message(s) refused, last: {}",
+                n.fq_name(),
+                n.errors,
+                n.last_error.as_deref().unwrap_or("")
+            );
+        }
     }
     // Give reliable writers a moment to deliver the last output, then leave the graph.
     std::thread::sleep(Duration::from_millis(200));
-    dn.node.stop_spinner();
-    drop(dn);
+    for dn in &dds_nodes {
+        dn.node.stop_spinner();
+    }
+    drop(router);
+    drop(dds_nodes);
     drop(ctx);
     Ok(errors)
+}
+
+/// Publishers by topic.
+#[derive(Default)]
+struct Publishers(Vec<(String, Pub)>);
+
+impl Publishers {
+    fn has(&self, topic: &str) -> bool {
+        self.0.iter().any(|(t, _)| t == topic)
+    }
+    fn publish(&self, topic: &str, m: &Msg) -> Result<(), String> {
+        let p = self.0.iter().find(|(t, _)| t == topic).ok_or_else(|| format!("no publisher on {topic}"))?;
+        p.1.publish(m)
+    }
 }
 
 #[cfg(test)]

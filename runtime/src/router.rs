@@ -1,6 +1,7 @@
 //! Several components in one process, connected in memory: a published message is handed to
 //! every subscriber before the publish call returns (depth first, no queue, so nothing can be
-//! dropped), and to an optional tap that forwards every topic to outside observers (DDS, a bag).
+//! dropped), and to an optional tap that forwards every output to outside observers (DDS, a
+//! bag).
 
 use crate::component::{Component, Msg, Outbox, Port};
 use crate::params::Params;
@@ -94,11 +95,9 @@ impl Router {
     pub fn has_subscriber(&self, topic: &str) -> bool {
         self.subs.contains_key(topic)
     }
-    /// Publishes `msg` on `topic` from outside the graph.
+    /// Delivers a message that came from outside the graph (a bag, DDS) to its subscribers;
+    /// the tap does not see it (it is not the graph's own output).
     pub fn publish(&mut self, topic: &str, msg: &Msg) {
-        if let Some(tap) = self.tap.as_mut() {
-            tap(topic, msg);
-        }
         let Some(subs) = self.subs.get(topic).cloned() else { return };
         for (node, input) in subs {
             let mut out = Outbox::default();
@@ -126,8 +125,28 @@ impl Router {
                 log::error!("{}: published on undeclared output {port}", self.nodes[node].fq_name());
                 continue;
             };
+            if let Some(tap) = self.tap.as_mut() {
+                tap(&topic, &msg);
+            }
             self.publish(&topic, &msg);
         }
+    }
+    /// Topics some node of the graph publishes.
+    pub fn output_topics(&self) -> Vec<(String, crate::component::Port)> {
+        self.nodes.iter().flat_map(|n| n.outputs.iter().map(|(p, t)| (t.clone(), p.clone()))).collect()
+    }
+    /// Topics some node subscribes to that no node of the graph publishes (they come from outside).
+    pub fn external_inputs(&self) -> Vec<(String, crate::component::Port)> {
+        let outs: std::collections::HashSet<String> = self.output_topics().into_iter().map(|(t, _)| t).collect();
+        let mut v: Vec<(String, crate::component::Port)> = Vec::new();
+        for n in &self.nodes {
+            for (p, t) in &n.inputs {
+                if !outs.contains(t) && !v.iter().any(|(x, _)| x == t) {
+                    v.push((t.clone(), p.clone()));
+                }
+            }
+        }
+        v
     }
     /// Ticks every node with the graph's clock.
     pub fn tick(&mut self, now_ns: i64) {

@@ -11,7 +11,9 @@ and tf. This script is an independent DDS peer (Cyclone DDS):
     checks the LaserLine our edge_detector answers with.
 It writes the received profile points (float32 x y z, little-endian) to OUT/points.f32 and a
 summary to OUT/summary.json; the Rust test compares the points with the ground truth.
-usage: dds_graph.py BIN_DIR BAG PARAMS OUT
+With MODE `composed`, the /cam1 nodes run in one `xsurf compose` process instead (the line passes
+in memory between them and is still published on DDS).
+usage: dds_graph.py BIN_DIR BAG PARAMS OUT [MODE]
 """
 import json
 import math
@@ -36,7 +38,7 @@ BEST_EFFORT = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(50))
 RELIABLE = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(100))
 
 
-def main(bin_dir, bag, params, out):
+def main(bin_dir, bag, params, out, mode="separate"):
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
     bin_dir = pathlib.Path(bin_dir)
@@ -48,18 +50,24 @@ def main(bin_dir, bag, params, out):
         logs[name] = out / f"{name}.log"
         return subprocess.Popen([str(bin_dir / args[0]), *args[1:]], stdout=f, stderr=subprocess.STDOUT, env=env)
 
-    procs = [
-        start("edge_detector_cam1", "edge_detector", "--ros-args", "-r", "__ns:=/cam1", "--params-file", params),
-        start("triangulator_cam1", "triangulator", "--ros-args", "-r", "__ns:=/cam1", "--params-file", params,
-              "-r", "profile:=profile_remapped"),
-        start("edge_detector_cam9", "edge_detector", "--ros-args", "-r", "__ns:=/cam9", "-p", "min_strength:=30.0"),
-    ]
+    if mode == "composed":
+        procs = [start("compose", "xsurf", "compose", "/cam1/edge_detector", "/cam1/triangulator", "--ros-args",
+                       "--params-file", params, "-r", "profile:=profile_remapped")]
+    else:
+        procs = [
+            start("edge_detector_cam1", "edge_detector", "--ros-args", "-r", "__ns:=/cam1", "--params-file", params),
+            start("triangulator_cam1", "triangulator", "--ros-args", "-r", "__ns:=/cam1", "--params-file", params,
+                  "-r", "profile:=profile_remapped"),
+        ]
+    procs.append(start("edge_detector_cam9", "edge_detector", "--ros-args", "-r", "__ns:=/cam9", "-p", "min_strength:=30.0"))
     dp = DomainParticipant(0)
     profile_reader = DataReader(dp, Topic(dp, "rt/cam1/profile_remapped", PointCloud2), qos=BEST_EFFORT)
     tf_reader = DataReader(dp, Topic(dp, "rt/tf", TFMessage), qos=BEST_EFFORT)
     line_reader = DataReader(dp, Topic(dp, "rt/cam9/laser_line", LaserLine), qos=RELIABLE)
+    # /cam1/laser_line is observed too: composed nodes still publish their internal topics.
+    line1_reader = DataReader(dp, Topic(dp, "rt/cam1/laser_line", LaserLine), qos=BEST_EFFORT)
     image_writer = DataWriter(dp, Topic(dp, "rt/cam9/image_raw", Image), qos=RELIABLE)
-    summary = {"clouds": 0, "cloud_errors": [], "tf": 0, "tf_frames": set(), "lines": []}
+    summary = {"cam1_lines": 0, "clouds": 0, "cloud_errors": [], "tf": 0, "tf_frames": set(), "lines": []}
     points = bytearray()
 
     def drain():
@@ -83,6 +91,9 @@ def main(bin_dir, bag, params, out):
                 summary["tf"] += 1
                 for t in s.transforms:
                     summary["tf_frames"].add(f"{t.header.frame_id}->{t.child_frame_id}")
+        for s in line1_reader.take(N=100):
+            if isinstance(s, LaserLine):
+                summary["cam1_lines"] += 1
         for s in line_reader.take(N=10):
             if isinstance(s, LaserLine):
                 found = [u for u in s.u if not math.isnan(u)]
@@ -155,4 +166,4 @@ def main(bin_dir, bag, params, out):
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:5])
+    main(*sys.argv[1:6])

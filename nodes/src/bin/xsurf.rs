@@ -7,8 +7,9 @@
 //! xsurf bag info DIR
 //! xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
 //! xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
+//! xsurf compose /NS/NODE_TYPE... [--ros-args ...]
 //! ```
-//! Only `bag play` and `param` open a DDS participant.
+//! Only `bag play`, `param` and `compose` open a DDS participant.
 
 use anyhow::{anyhow, bail, Context};
 use std::path::{Path, PathBuf};
@@ -31,7 +32,9 @@ const USAGE: &str = "usage:
   xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
       publish a bag over DDS with its original timing (honours ROS_DOMAIN_ID, ROS_LOCALHOST_ONLY)
   xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
-      a node's parameters through the standard ROS 2 parameter services (like `ros2 param`)";
+      a node's parameters through the standard ROS 2 parameter services (like `ros2 param`)
+  xsurf compose /NS/NODE_TYPE... [--ros-args ...]
+      run several nodes in one process, connected in memory, every topic still on DDS";
 
 /// A command-line mistake: exit code 2.
 #[derive(Debug)]
@@ -296,8 +299,12 @@ fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
-    xsurf_runtime::logging::init(log::LevelFilter::Info, vec![]);
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().map(String::as_str) == Some("compose") {
+        // Logging levels come from its own ROS arguments.
+        return xsurf_nodes::host::compose(&args[1..]);
+    }
+    xsurf_runtime::logging::init(log::LevelFilter::Info, vec![]);
     let r = match args.first().map(String::as_str) {
         Some("demo") => cmd_demo(&args[1..]),
         Some("synth") => cmd_synth(&args[1..]),
