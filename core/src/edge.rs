@@ -275,17 +275,39 @@ impl LaserLine {
 /// A sample type of a row profile.
 trait Sample: Copy + PartialOrd {
     fn f(self) -> f32;
+    /// Sum and sum of squares of a run.
+    fn moments(s: &[Self]) -> (f32, f32);
 }
 impl Sample for u8 {
     #[inline(always)]
     fn f(self) -> f32 {
         f32::from(self)
     }
+    /// Exact integer sums (a flank of at most 256 samples cannot overflow u32).
+    #[inline(always)]
+    fn moments(s: &[u8]) -> (f32, f32) {
+        let (mut a, mut b) = (0u32, 0u32);
+        for &v in s {
+            let x = u32::from(v);
+            a += x;
+            b += x * x;
+        }
+        (a as f32, b as f32)
+    }
 }
 impl Sample for f32 {
     #[inline(always)]
     fn f(self) -> f32 {
         self
+    }
+    #[inline(always)]
+    fn moments(s: &[f32]) -> (f32, f32) {
+        let (mut a, mut b) = (0.0f32, 0.0f32);
+        for &x in s {
+            a += x;
+            b += x * x;
+        }
+        (a, b)
     }
 }
 
@@ -314,28 +336,28 @@ fn argmax_f32(p: &[f32]) -> Option<usize> {
     best.map(|(i, _)| i)
 }
 
-/// Sum, sum of squares and count of a run of samples (one pass).
-fn moments<S: Sample>(s: &[S]) -> (f32, f32, usize) {
-    let (mut a, mut b) = (0.0f32, 0.0f32);
-    for v in s {
-        let x = v.f();
-        a += x;
-        b += x * x;
-    }
-    (a, b, s.len())
-}
-
 /// Background level and noise around a peak at `m`, from flanks outside `±gap`: the pooled mean,
 /// and the standard deviation of each flank about its own mean (so a shading slope between the
 /// two flanks is not counted as noise).
+#[inline]
 fn background<S: Sample>(p: &[S], m: usize, gap: usize, flank: usize) -> (f32, f32) {
-    let left = m.checked_sub(gap + 1).map(|end| moments(&p[end.saturating_sub(flank - 1)..=end]));
-    let right = (m + gap + 1 < p.len()).then(|| moments(&p[m + gap + 1..(m + gap + 1 + flank).min(p.len())]));
     let (mut sum, mut n, mut ss) = (0.0f32, 0usize, 0.0f32);
-    for (a, b, k) in [left, right].into_iter().flatten() {
-        if k == 0 {
-            continue;
+    if m > gap {
+        let end = m - gap;
+        let side = &p[end.saturating_sub(flank)..end];
+        let (a, b) = S::moments(side);
+        let k = side.len();
+        if k > 0 {
+            sum += a;
+            n += k;
+            ss += b - a * a / k as f32;
         }
+    }
+    let start = m + gap + 1;
+    if start < p.len() {
+        let side = &p[start..(start + flank).min(p.len())];
+        let (a, b) = S::moments(side);
+        let k = side.len();
         sum += a;
         n += k;
         ss += b - a * a / k as f32;
@@ -369,7 +391,8 @@ fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturat
     let max_hw = cfg.max_half_width_px as usize;
     // First pass: the run above half of the peak over the row minimum nearby gives the gap
     // that keeps the background flanks off the line.
-    let gap0 = max_hw.min(4);
+    // Wide enough that the flanks clear most lines on the first try.
+    let gap0 = max_hw.min(6);
     let (bg0, noise0) = background(p, m, gap0, cfg.flank_px as usize);
     let half0 = bg0 + 0.5 * (peak - bg0);
     let mut lo = m;
@@ -388,11 +411,10 @@ fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturat
     }
     // Full width at half maximum.
     let half = bg + 0.5 * strength;
-    let mut l = m;
+    let (mut l, mut r) = if gap == gap0 { (lo, hi) } else { (m, m) };
     while l > 0 && m - l <= max_hw && p[l - 1].f() > half {
         l -= 1;
     }
-    let mut r = m;
     while r + 1 < n && r - m <= max_hw && p[r + 1].f() > half {
         r += 1;
     }

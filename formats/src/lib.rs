@@ -11,6 +11,7 @@ pub mod bag;
 pub mod gltf;
 pub mod image;
 pub mod ply;
+pub mod preview;
 pub mod scene;
 pub mod vrml;
 

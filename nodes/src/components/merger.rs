@@ -1,6 +1,6 @@
 //! `merger`: the cameras' organized clouds (`/<cam>/cloud` for each name in `cameras`) ->
 //! one surface in `table` (`/surface/cloud`, `/surface/mesh`) after each END, and the files
-//! `<output_dir>/scan_<id>/{merged.ply, scene.wrl, scene.glb}`.
+//! `<output_dir>/scan_<id>/{merged.ply, scene.wrl, scene.glb, preview.png}`.
 //!
 //! The cameras are placed by calibration (their clouds are already in `table`); each grid is
 //! meshed and the surfaces are combined. The merge waits `merge_delay_s` after END so the
@@ -191,6 +191,9 @@ impl MergerNode {
     }
 }
 
+/// Size of `preview.png`, pixels.
+const PREVIEW_SIZE: (u32, u32) = (960, 720);
+
 fn write_files(
     dir: &std::path::Path,
     merged: &Mesh,
@@ -205,6 +208,9 @@ fn write_files(
     };
     xsurf_formats::vrml::write_file(&dir.join("scene.wrl"), &scene)?;
     xsurf_formats::gltf::write_file(&dir.join("scene.glb"), &scene)?;
+    let (w, h) = PREVIEW_SIZE;
+    let rgb = xsurf_formats::preview::render(merged, w, h);
+    xsurf_formats::image::write_png(&dir.join("preview.png"), w, h, xsurf_formats::image::PngKind::Rgb8, &rgb)?;
     Ok(())
 }
 
