@@ -43,7 +43,8 @@ pub fn node_config(
         params,
         validate: Arc::new(move |p: &Params| components::build(node, p).map(|_| ()).map_err(|e| e.to_string())),
         rosout: ros.rosout_logs.unwrap_or(true),
-        tick_period: Duration::from_millis(50),
+        // Sources keep time on their own clocks; the processing nodes only need slow ticks.
+        tick_period: Duration::from_millis(if matches!(node, "camera_driver" | "c_arm_pose") { 2 } else { 50 }),
     };
     Ok((cfg, component))
 }

@@ -205,6 +205,11 @@ impl Scanner {
         Ok(Self { scene, rig, laser, settings, cams, plane_carm })
     }
 
+    /// Index of the rig camera called `name`.
+    pub fn camera_index(&self, name: &str) -> Option<usize> {
+        self.rig.cameras.iter().position(|c| c.name == name)
+    }
+
     /// Travel range of the scan, metres.
     pub fn travel_range(&self) -> (f64, f64) {
         (
@@ -257,7 +262,13 @@ impl Scanner {
     /// Renders camera `cam`'s image of frame `index`.
     pub fn render(&self, cam: usize, index: u32) -> Image {
         let ft = self.frame_time(index);
-        let pose = table_from_carm(ft.travel_m, 0.0, 0.0);
+        self.render_at(cam, &table_from_carm(ft.travel_m, 0.0, 0.0), ft.laser_on, u64::from(index))
+    }
+
+    /// Renders camera `cam`'s image with the C-arm at `pose` (`table -> carm`); `frame_seed`
+    /// varies the sensor noise from frame to frame.
+    pub fn render_at(&self, cam: usize, pose: &Iso3, laser_on: bool, frame_seed: u64) -> Image {
+        let pose = *pose;
         let c = &self.cams[cam];
         let (w, h) = (c.model.width as usize, c.model.height as usize);
         let table_from_optical = pose.compose(&c.carm_from_optical);
@@ -268,7 +279,7 @@ impl Scanner {
             plane: self.plane_carm.transformed(&pose),
             source: pose.transform_point(Vec3::from_array(self.rig.laser_source)),
             carm_from_table: pose.inverse(),
-            laser_on: ft.laser_on,
+            laser_on,
         };
         // Pass 1: centre rays, signed distance of each hit from the laser sheet.
         let mut center = vec![Shade::default(); w * h];
@@ -291,7 +302,7 @@ impl Scanner {
         let mut img = Image::new(w as u32, h as u32, enc);
         let band = 4.0 * self.laser.sheet_sigma_m;
         let n = self.settings.supersample as usize;
-        let seed = self.settings.seed ^ ((cam as u64 + 1) << 48) ^ (u64::from(index) << 16);
+        let seed = self.settings.seed ^ ((cam as u64 + 1) << 48) ^ (frame_seed << 16);
         std::thread::scope(|s| {
             for (k, chunk) in img.data.chunks_mut(rows_per * w * bpp).enumerate() {
                 let (ctx, center) = (&ctx, &center);

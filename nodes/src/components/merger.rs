@@ -119,6 +119,8 @@ impl MergerNode {
     fn grid_of(cloud: &PointCloud2) -> Result<Grid, pointcloud::CloudError> {
         let pts = pointcloud::read(cloud)?;
         let (h, w) = (cloud.height as usize, cloud.width as usize);
+        // Grey cameras send rgb 0: then the vertices take their grey from the laser strength.
+        let has_rgb = pts.iter().any(|p| p.rgb.is_some_and(|c| c != 0));
         let mut g = Grid::new(h);
         for c in 0..w {
             let col =
@@ -126,7 +128,7 @@ impl MergerNode {
             let p = xsurf_core::triangulate::Profile {
                 points: (0..h).map(|r| pts[r * w + c].xyz).collect(),
                 intensity: col(&|p| p.intensity.unwrap_or(0.0)),
-                rgb: Some((0..h).map(|r| pts[r * w + c].rgb.unwrap_or(0)).collect()),
+                rgb: has_rgb.then(|| (0..h).map(|r| pts[r * w + c].rgb.unwrap_or(0)).collect()),
                 range: vec![f32::NAN; h],
             };
             let _ = g.push(c as i64, &p);

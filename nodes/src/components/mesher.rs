@@ -247,6 +247,10 @@ impl MesherNode {
             OUT_MESH,
             Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header, &self.camera, self.scan_id as i32, 1.0))),
         );
+        if grid.valid() == 0 {
+            log::warn!("{}: scan {} has no points; nothing written", self.camera, self.scan_id);
+            return;
+        }
         if let Some(dir) = &self.cfg.output_dir {
             let dir = dir.join(format!("scan_{}{}", self.scan_id, if aborted { "_aborted" } else { "" }));
             let path = dir.join(format!("{}.ply", if self.camera.is_empty() { "camera" } else { &self.camera }));
@@ -306,6 +310,10 @@ impl Component for MesherNode {
             (IN_PROFILE, Msg::Cloud(c)) => {
                 let p = convert::cloud_profile(c).map_err(|e| NodeError::new(format!("profile: {e}")))?;
                 if !self.active {
+                    // Outside a scan, frames without points (laser off) start nothing.
+                    if p.valid() == 0 {
+                        return Ok(());
+                    }
                     self.start(0);
                 }
                 let stamp = c.header.stamp.nanos();

@@ -2,6 +2,8 @@
 //! declares its parameters with defaults, units and meanings, and is documented in
 //! `nodes/README.md`.
 
+pub mod c_arm_pose;
+pub mod camera_driver;
 pub mod edge_detector;
 pub mod merger;
 pub mod mesher;
@@ -27,6 +29,8 @@ pub const NODE_NAMES: [&str; 7] =
 /// The declarations of a node by name (for docs and `ros2 param` services).
 pub fn declarations(node: &str) -> Option<Vec<ParamDecl>> {
     Some(match node {
+        "camera_driver" => camera_driver::declarations(),
+        "c_arm_pose" => c_arm_pose::declarations(),
         "edge_detector" => edge_detector::declarations(),
         "triangulator" => triangulator::declarations(),
         "mesher" => mesher::declarations(),
@@ -38,6 +42,8 @@ pub fn declarations(node: &str) -> Option<Vec<ParamDecl>> {
 /// Builds a component by node name from its resolved parameters.
 pub fn build(node: &str, params: &Params) -> Result<Box<dyn Component>, ParamError> {
     Ok(match node {
+        "camera_driver" => Box::new(camera_driver::CameraDriverNode::new(params)?),
+        "c_arm_pose" => Box::new(c_arm_pose::CArmPoseNode::new(params)?),
         "edge_detector" => Box::new(edge_detector::EdgeDetectorNode::new(params)?),
         "triangulator" => Box::new(triangulator::TriangulatorNode::new(params)?),
         "mesher" => Box::new(mesher::MesherNode::new(params)?),
