@@ -50,7 +50,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         return Err(Params::invalid("speed", format!("{speed} m/s is not in (0, 2)")));
     }
     let rate = p.f64("rate_hz")?;
-    if !(rate >= 1.0 && rate <= 1000.0) {
+    if !(1.0..=1000.0).contains(&rate) {
         return Err(Params::invalid("rate_hz", format!("{rate} is not in [1, 1000]")));
     }
     let rig_file = p.string("rig_file")?;
