@@ -183,7 +183,7 @@ impl Component for CArmPoseNode {
                 out.publish(3, self.event(t0, ScanEvent::START));
             }
         }
-        if now - self.last_pub >= self.cfg.period_ns {
+        if now.saturating_sub(self.last_pub) >= self.cfg.period_ns {
             self.last_pub = now;
             let travel = self.travel(now);
             let pose = table_from_carm(travel, 0.0, 0.0);

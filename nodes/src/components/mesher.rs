@@ -1,8 +1,9 @@
 //! `mesher`: `profile` -> the organized grid of the scan (`cloud`, published while the scan
 //! runs) and its mesh (`mesh`, at END), plus `<output_dir>/scan_<id>/<cam>.ply`.
 //!
-//! Scans are bounded by `/scan/events` from whoever publishes them; profiles before any START
-//! form scan 0. Gaps in the frame stamps are counted as dropped frames, logged, and kept as
+//! Scans are bounded by `/scan/events` from whoever publishes them: frames outside START..END
+//! belong to no scan (counted). A source without events (a bag of one scan) gives scan 0, from
+//! the first frame with points. Gaps in the frame stamps are counted as dropped frames, logged, and kept as
 //! empty grid columns so the mesh does not bridge them (a single missing frame is filled).
 
 use super::decl;
@@ -154,6 +155,8 @@ pub struct MesherNode {
     camera: String,
     scan_id: u32,
     active: bool,
+    /// Once a scan event has been seen, scans are bounded by events only.
+    events_seen: bool,
     grid: Grid,
     gaps: GapDetector,
     last_cloud_ns: i64,
@@ -162,6 +165,7 @@ pub struct MesherNode {
     dropped_frames: u64,
     triangles: u64,
     files_written: u64,
+    outside_scan: u64,
 }
 
 const IN_PROFILE: usize = 0;
@@ -180,6 +184,7 @@ impl MesherNode {
             cfg,
             scan_id: 0,
             active: false,
+            events_seen: false,
             grid: Grid::default(),
             gaps: GapDetector::default(),
             last_cloud_ns: i64::MIN,
@@ -188,6 +193,7 @@ impl MesherNode {
             dropped_frames: 0,
             triangles: 0,
             files_written: 0,
+            outside_scan: 0,
         })
     }
 
@@ -310,8 +316,10 @@ impl Component for MesherNode {
             (IN_PROFILE, Msg::Cloud(c)) => {
                 let p = convert::cloud_profile(c).map_err(|e| NodeError::new(format!("profile: {e}")))?;
                 if !self.active {
-                    // Outside a scan, frames without points (laser off) start nothing.
-                    if p.valid() == 0 {
+                    // Outside a scan bounded by events, frames belong to no scan. Without any
+                    // event (a bag of one scan), the first frame with points starts scan 0.
+                    if self.events_seen || p.valid() == 0 {
+                        self.outside_scan += 1;
                         return Ok(());
                     }
                     self.start(0);
@@ -328,6 +336,7 @@ impl Component for MesherNode {
                 Ok(())
             }
             (IN_EVENTS, Msg::ScanEvent(e)) => {
+                self.events_seen = true;
                 match e.event {
                     ScanEvent::START => {
                         self.close(false, out);
@@ -353,6 +362,7 @@ impl Component for MesherNode {
             ("dropped_frames", self.dropped_frames),
             ("triangles", self.triangles),
             ("files_written", self.files_written),
+            ("frames_outside_scans", self.outside_scan),
         ]
     }
 }

@@ -1,0 +1,81 @@
+//! The live graph: c_arm_pose, two synthetic camera_drivers, edge_detector, triangulator and
+//! mesher per camera, and the merger, over DDS inside a private network namespace, composed in
+//! one process and as separate processes. One scan of the study's pyramid; the merged surface
+//! the merger writes is measured against the true pyramid.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+use common::*;
+use std::process::Command;
+use xsurf_core::eval;
+
+fn live(mode: &str, seconds: u32) {
+    let netns = root().join("../shared/tools/netns-run");
+    assert!(netns.is_file(), "{} is needed to keep DDS on this machine", netns.display());
+    let out = scratch(&format!("live-{mode}"));
+    let files = out.join("files");
+    let params = out.join("params.yaml");
+    std::fs::write(
+        &params,
+        format!(
+            "/**:\n  ros__parameters:\n    laser_plane: [0.0, 1.0, 0.0, 0.0]\n    output_dir: {}\n/**/camera_driver:\n  ros__parameters:\n    width: 320\n    height: 240\n    fps: 15.0\n/c_arm_pose:\n  ros__parameters:\n    speed: 0.07\n    start_delay_s: 1.5\n/merger:\n  ros__parameters:\n    merge_delay_s: 1.0\n",
+            files.display()
+        ),
+    )
+    .unwrap();
+    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
+    let run = Command::new(&netns)
+        .arg(root().join("tests/live_graph.sh"))
+        .args([
+            mode,
+            bin_dir.to_str().unwrap(),
+            params.to_str().unwrap(),
+            out.join("logs").to_str().unwrap(),
+            &seconds.to_string(),
+        ])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let logs = || {
+        std::fs::read_dir(out.join("logs"))
+            .unwrap()
+            .map(|e| {
+                let p = e.unwrap().path();
+                format!("--- {}\n{}", p.display(), std::fs::read_to_string(&p).unwrap_or_default())
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    assert!(run.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&run.stderr));
+    let exits = stdout.lines().find_map(|l| l.strip_prefix("exits ")).unwrap_or("");
+    assert!(exits.split(' ').all(|c| c == "0"), "every node leaves cleanly on SIGTERM: {exits}\n{}", logs());
+    let scan = files.join("scan_1");
+    for f in ["cam1.ply", "cam2.ply", "merged.ply", "scene.wrl", "scene.glb", "preview.png"] {
+        assert!(scan.join(f).is_file(), "{f} missing after the scan's END\n{}", logs());
+    }
+    let merged =
+        xsurf_formats::ply::read(&mut std::io::BufReader::new(std::fs::File::open(scan.join("merged.ply")).unwrap()))
+            .unwrap();
+    let scene = xsurf_core::synth::Scene::by_name("pyramid").unwrap();
+    let acc = eval::accuracy(eval::surface_errors(&scene, &merged.positions));
+    eprintln!("{mode}: {acc:?}");
+    // 320x240 at 70 mm/s and 15 fps: about 75 frames x 2 cameras x ~220 points.
+    assert!(acc.points > 20_000, "{acc:?}\n{}", logs());
+    assert!(acc.rms_m <= 0.0010 && acc.outlier_fraction_2mm < 0.005, "{acc:?}");
+    let e = eval::pyramid_extents(&scene, &merged.positions).expect("pyramid measurable");
+    assert!(
+        (e.base_x_m - 0.210).abs() < 0.001 && (e.base_y_m - 0.297).abs() < 0.001 && (e.height_m - 0.086).abs() < 0.001,
+        "{e:?}"
+    );
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
+fn live_graph_composed() {
+    live("composed", 10);
+}
+
+#[test]
+fn live_graph_separate_processes() {
+    live("separate", 13);
+}
