@@ -1,0 +1,64 @@
+//! The files in launch-config/ parse, agree with each other, and configure every node.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+use common::*;
+use xsurf_nodes::components;
+use xsurf_runtime::params::{ParamValue, Params};
+use xsurf_runtime::rosargs::RosArgs;
+
+#[test]
+fn rig_file_is_the_study_rig() {
+    let text = std::fs::read_to_string(root().join("launch-config/rig_study.yaml")).unwrap();
+    let rig: xsurf_core::rig::Rig = serde_yaml::from_str(&text).unwrap();
+    assert_eq!(rig, xsurf_core::rig::Rig::study(640, 480));
+}
+
+#[test]
+fn params_file_configures_every_node_and_matches_the_rig() {
+    let path = root().join("launch-config/params.yaml");
+    let ros = RosArgs::parse(&["--ros-args", "--params-file", path.to_str().unwrap()]).unwrap();
+    let nodes = [
+        ("c_arm_pose", "/c_arm_pose"),
+        ("camera_driver", "/cam1/camera_driver"),
+        ("edge_detector", "/cam2/edge_detector"),
+        ("triangulator", "/cam1/triangulator"),
+        ("mesher", "/cam2/mesher"),
+        ("merger", "/merger"),
+    ];
+    for (node, fq) in nodes {
+        let o = ros.param_overrides(fq).unwrap();
+        let p = Params::resolve(&components::declarations(node).unwrap(), &o).unwrap();
+        components::build(node, &p).unwrap_or_else(|e| panic!("{fq}: {e}"));
+        if node == "triangulator" {
+            let rig = xsurf_core::rig::Rig::study(640, 480);
+            assert_eq!(p.get("laser_plane"), Some(&ParamValue::DoubleArray(rig.laser_plane.to_vec())));
+        }
+    }
+}
+
+#[test]
+fn launch_file_names_our_executables() {
+    let text = std::fs::read_to_string(root().join("launch-config/xsurf.launch.yaml")).unwrap();
+    let doc: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
+    let mut execs = Vec::new();
+    fn walk(v: &serde_yaml::Value, out: &mut Vec<String>) {
+        match v {
+            serde_yaml::Value::Mapping(m) => {
+                for (k, v) in m {
+                    if k.as_str() == Some("exec") {
+                        out.push(v.as_str().unwrap().to_string());
+                    }
+                    walk(v, out);
+                }
+            }
+            serde_yaml::Value::Sequence(s) => s.iter().for_each(|v| walk(v, out)),
+            _ => {}
+        }
+    }
+    walk(&doc, &mut execs);
+    assert_eq!(execs.len(), 10, "{execs:?}");
+    for e in &execs {
+        assert!(components::NODE_NAMES.contains(&e.as_str()), "{e}");
+    }
+}
