@@ -32,6 +32,7 @@ fn live(mode: &str, seconds: u32) {
             params.to_str().unwrap(),
             out.join("logs").to_str().unwrap(),
             &seconds.to_string(),
+            files.join("scan_1/preview.png").to_str().unwrap(),
         ])
         .output()
         .unwrap();
@@ -70,12 +71,9 @@ fn live(mode: &str, seconds: u32) {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// One after the other: each mode needs the two cores for its cameras.
 #[test]
-fn live_graph_composed() {
-    live("composed", 10);
-}
-
-#[test]
-fn live_graph_separate_processes() {
-    live("separate", 13);
+fn live_graph_composed_then_separate_processes() {
+    live("composed", 60);
+    live("separate", 60);
 }

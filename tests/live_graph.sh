@@ -2,9 +2,10 @@
 # Runs the whole live graph for SECONDS, then stops it with SIGTERM and prints the exit codes.
 # MODE composed: one `xsurf compose` process; separate: one process per node.
 # Run it inside ../shared/tools/netns-run (tests/live.rs does).
-# usage: live_graph.sh MODE BIN_DIR PARAMS OUT SECONDS
+# It stops the graph DONE_GRACE seconds after DONE_FILE appears, or after SECONDS at most.
+# usage: live_graph.sh MODE BIN_DIR PARAMS OUT SECONDS DONE_FILE
 set -u
-mode=$1 bin=$2 params=$3 out=$4 secs=$5
+mode=$1 bin=$2 params=$3 out=$4 secs=$5 done_file=$6
 mkdir -p "$out"
 export ROS_LOCALHOST_ONLY=1
 pids=()
@@ -26,7 +27,11 @@ else
   "$bin/c_arm_pose" --ros-args --params-file "$params" >"$out/c_arm_pose.log" 2>&1 &
   pids+=($!)
 fi
-sleep "$secs"
+for ((i = 0; i < secs * 10; i++)); do
+  [[ -f $done_file ]] && break
+  sleep 0.1
+done
+sleep 0.5
 kill -TERM "${pids[@]}" 2>/dev/null
 codes=()
 for p in "${pids[@]}"; do

@@ -11,5 +11,6 @@ pub mod host;
 pub mod offline;
 pub mod param_client;
 pub mod play;
+pub mod record;
 pub mod synth;
 pub mod tf;

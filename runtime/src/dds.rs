@@ -312,6 +312,51 @@ fn subscribe(
     Ok(())
 }
 
+/// Subscribes `topic` on `node`, handing every message to `tx` as `(index, message)`. Camera
+/// streams (`class` Sensor) are dropped and counted when `tx` is full; others wait.
+pub fn subscribe_forward(
+    node: &mut DdsNode,
+    topic: &str,
+    type_name_full: &str,
+    class: QosClass,
+    index: usize,
+    tx: SyncSender<(usize, Msg)>,
+    stop: Arc<AtomicBool>,
+) -> Result<Arc<AtomicU64>, HostError> {
+    let (etx, erx) = sync_channel::<Event>(QUEUE_DEPTH);
+    let dropped = Arc::new(AtomicU64::new(0));
+    let feed = Feed { tx: etx, dropped: dropped.clone(), stop };
+    subscribe(node.node(), topic, type_name_full, qos(class), class == QosClass::Sensor, index, feed)?;
+    std::thread::spawn(move || {
+        while let Ok(ev) = erx.recv() {
+            if let Event::Message(i, m) = ev {
+                if tx.send((i, m)).is_err() {
+                    break;
+                }
+            }
+        }
+    });
+    Ok(dropped)
+}
+
+/// The topics the participant has discovered, as (`/name`, `pkg/msg/Type`).
+pub fn discovered_topics(ctx: &Context) -> Vec<(String, String)> {
+    ctx.discovered_topics()
+        .into_iter()
+        .filter_map(|t| {
+            let mut it = t.type_name.split("::");
+            let (pkg, msg, dds, ty) = (it.next()?, it.next()?, it.next()?, it.next()?);
+            // ROS topics are DDS topics `rt/...`; services (`rq/`, `rr/`) and others are skipped.
+            let name = match t.name.strip_prefix("rt/") {
+                Some(rest) => format!("/{rest}"),
+                None if t.name.starts_with('/') => t.name.clone(),
+                None => return None,
+            };
+            (msg == "msg" && dds == "dds_").then(|| (name, format!("{pkg}/msg/{}", ty.trim_end_matches('_'))))
+        })
+        .collect()
+}
+
 /// Checks a full set of parameter values (the component's own config conversion).
 pub type Validator = Arc<dyn Fn(&Params) -> Result<(), String> + Send + Sync>;
 

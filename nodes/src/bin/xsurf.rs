@@ -5,11 +5,12 @@
 //! xsurf synth SCENE -o DIR [--size WxH] [--speed M_S] [--fps F] [--encoding E] [--seed N] [--zstd]
 //! xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
 //! xsurf bag info DIR
+//! xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--duration S]
 //! xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
 //! xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
 //! xsurf compose /NS/NODE_TYPE... [--ros-args ...]
 //! ```
-//! Only `bag play`, `param` and `compose` open a DDS participant.
+//! Only `bag record`, `bag play`, `param` and `compose` open a DDS participant.
 
 use anyhow::{anyhow, bail, Context};
 use std::path::{Path, PathBuf};
@@ -29,6 +30,8 @@ const USAGE: &str = "usage:
       reconstruct a recorded scan offline: DIR/<cam>.ply, merged.ply, scene.wrl, scene.glb, report.json
   xsurf bag info DIR
       summarize a bag, like `ros2 bag info`
+  xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--duration S]
+      record topics from DDS into a bag (QoS recorded per topic); stops on Ctrl-C or after S
   xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
       publish a bag over DDS with its original timing (honours ROS_DOMAIN_ID, ROS_LOCALHOST_ONLY)
   xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
@@ -271,6 +274,23 @@ fn cmd_demo(args: &[String]) -> anyhow::Result<()> {
 
 fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
     match args.first().map(String::as_str) {
+        Some("record") => {
+            let a = Args::parse(&args[1..], &["--all", "--zstd"], &["-o", "--output", "--duration"])?;
+            let out = a.get("-o").or(a.get("--output")).ok_or_else(|| usage("bag record needs -o DIR"))?;
+            let opts = xsurf_nodes::record::RecordOptions {
+                topics: a.positional.clone(),
+                all: a.has("--all"),
+                zstd: a.has("--zstd"),
+                duration_s: a
+                    .get("--duration")
+                    .map(|d| d.parse())
+                    .transpose()
+                    .map_err(|_| usage("--duration: not a number"))?,
+            };
+            let n = xsurf_nodes::record::record(Path::new(out), &opts)?;
+            eprintln!("bag record: {n} messages written to {out}");
+            Ok(())
+        }
         Some("play") => {
             let a =
                 Args::parse(&args[1..], &["--loop", "--clock"], &["--rate", "--start-offset", "--delay", "--topics"])?;
@@ -293,8 +313,8 @@ fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
             print!("{}", bag.info());
             Ok(())
         }
-        Some(other) => Err(usage(format!("unknown bag command {other:?} (info, play)"))),
-        None => Err(usage("bag needs a command (info, play)")),
+        Some(other) => Err(usage(format!("unknown bag command {other:?} (info, play, record)"))),
+        None => Err(usage("bag needs a command (info, play, record)")),
     }
 }
 
