@@ -79,7 +79,11 @@ fn body_grid() -> Grid {
                 }
             })
             .collect();
-        g.push(f as i64, &Profile { points, intensity: vec![100.0; ns], rgb: None, range: vec![0.9; ns] }).unwrap();
+        g.push(
+            f as i64,
+            &Profile { points, intensity: vec![100.0; ns], rgb: None, range: vec![0.9; ns], outside_volume: 0 },
+        )
+        .unwrap();
     }
     g
 }

@@ -208,6 +208,49 @@ impl Mesh {
         self.triangles.extend(other.triangles.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
     }
 
+    /// Drops the vertices no triangle uses (isolated points are not surface) and renumbers the
+    /// triangles. Returns how many were dropped.
+    pub fn remove_unreferenced(&mut self) -> usize {
+        let n = self.positions.len();
+        let mut map = vec![u32::MAX; n];
+        for t in &self.triangles {
+            for &i in t {
+                map[i as usize] = 0;
+            }
+        }
+        let mut next = 0u32;
+        for m in map.iter_mut() {
+            if *m == 0 {
+                *m = next;
+                next += 1;
+            }
+        }
+        let keep = |v: &mut Vec<[f32; 3]>| {
+            if v.len() == n {
+                let mut k = 0;
+                v.retain(|_| {
+                    k += 1;
+                    map[k - 1] != u32::MAX
+                });
+            }
+        };
+        keep(&mut self.positions);
+        keep(&mut self.normals);
+        if self.colors.len() == n {
+            let mut k = 0;
+            self.colors.retain(|_| {
+                k += 1;
+                map[k - 1] != u32::MAX
+            });
+        }
+        for t in &mut self.triangles {
+            for i in t.iter_mut() {
+                *i = map[*i as usize];
+            }
+        }
+        n - next as usize
+    }
+
     /// Area-weighted vertex normals.
     pub fn compute_normals(&mut self) {
         let mut acc = vec![[0.0f64; 3]; self.positions.len()];
@@ -310,7 +353,8 @@ fn grey_from_intensity(i: f32) -> [u8; 3] {
     [g, g, g]
 }
 
-/// Triangulates an organized grid into a mesh (vertices are the grid's finite points).
+/// Triangulates an organized grid into a mesh. Its vertices are the grid's finite points that
+/// some triangle uses (isolated points are left out of the surface; the grid keeps them).
 pub fn mesh_grid(grid: &Grid, cfg: &MeshConfig) -> Mesh {
     let (ns, nf) = (grid.samples(), grid.frames());
     let mut index = vec![u32::MAX; grid.points().len()];
@@ -397,6 +441,7 @@ pub fn mesh_grid(grid: &Grid, cfg: &MeshConfig) -> Mesh {
             t.swap(1, 2);
         }
     }
+    mesh.remove_unreferenced();
     mesh.smooth(cfg.smooth_iterations, cfg.smooth_lambda);
     mesh.compute_normals();
     mesh
@@ -414,6 +459,7 @@ mod tests {
                 intensity: vec![100.0; ns],
                 rgb: None,
                 range: vec![1.0; ns],
+                ..Default::default()
             };
             g.push(f as i64, &p).unwrap();
         }
@@ -427,6 +473,18 @@ mod tests {
         assert_eq!(m.positions.len(), 20);
         assert_eq!(m.triangles.len(), 2 * 4 * 3);
         assert!(m.normals.iter().all(|n| (n[2] - 1.0).abs() < 1e-6));
+    }
+
+    #[test]
+    fn isolated_points_are_not_surface_vertices() {
+        let mut g = flat_grid(4, 4, 0.001, 0.001);
+        // A far point in the middle of a row: its triangles fail the edge rule.
+        g.points[5] = [0.5, 0.5, 0.5];
+        let m = mesh_grid(&g, &MeshConfig::default());
+        assert_eq!(m.positions.len(), 15);
+        assert!(m.positions.iter().all(|p| p[2] == 0.0));
+        assert!(m.triangles.iter().flatten().all(|&i| (i as usize) < m.positions.len()));
+        assert_eq!(m.colors.len(), 15);
     }
 
     #[test]
@@ -470,7 +528,13 @@ mod tests {
     #[test]
     fn mismatched_profile_length_is_refused() {
         let mut g = flat_grid(4, 1, 0.001, 0.001);
-        let p = Profile { points: vec![[0.0; 3]; 3], intensity: vec![0.0; 3], rgb: None, range: vec![0.0; 3] };
+        let p = Profile {
+            points: vec![[0.0; 3]; 3],
+            intensity: vec![0.0; 3],
+            rgb: None,
+            range: vec![0.0; 3],
+            ..Default::default()
+        };
         assert_eq!(g.push(1, &p), Err(3));
     }
 }

@@ -22,11 +22,22 @@ pub struct TriangulatorConfig {
     pub min_ray_plane_angle_deg: f64,
     /// Samples weaker than this (grey levels) are dropped.
     pub min_strength: f32,
+    /// Points below this height above the tabletop (`table` z, metres) are rejected: nothing
+    /// under the tabletop can be seen, so such a point is a false detection.
+    pub min_z_m: f64,
+    /// Points above this height are rejected: the top of the measurement volume.
+    pub max_z_m: f64,
 }
 
 impl Default for TriangulatorConfig {
     fn default() -> Self {
-        Self { laser_plane: [0.0, 1.0, 0.0, 0.0], min_ray_plane_angle_deg: 10.0, min_strength: 0.0 }
+        Self {
+            laser_plane: [0.0, 1.0, 0.0, 0.0],
+            min_ray_plane_angle_deg: 10.0,
+            min_strength: 0.0,
+            min_z_m: -0.01,
+            max_z_m: 0.6,
+        }
     }
 }
 
@@ -57,6 +68,8 @@ pub struct Profile {
     pub points: Vec<[f32; 3]>,
     /// Laser strength per point (grey levels), 0 where none.
     pub intensity: Vec<f32>,
+    /// Samples rejected because their point fell outside the measurement volume.
+    pub outside_volume: u32,
     /// Surface colour per point, 0x00RRGGBB; `None` for grey images.
     pub rgb: Option<Vec<u32>>,
     /// Distance from the camera centre per point (m), NaN where none.
@@ -77,6 +90,7 @@ pub struct Triangulator {
     plane_optical: Plane,
     min_sin: f64,
     min_strength: f32,
+    z_range: (f64, f64),
 }
 
 impl Triangulator {
@@ -97,6 +111,7 @@ impl Triangulator {
             plane_optical,
             min_sin: config.min_ray_plane_angle_deg.to_radians().sin(),
             min_strength: config.min_strength,
+            z_range: (config.min_z_m, config.max_z_m),
         })
     }
 
@@ -136,6 +151,7 @@ impl Triangulator {
         let color = line.rgb.len() == 3 * n && n > 0;
         out.rgb = color.then(|| vec![0u32; n]);
         let table_from_optical = table_from_carm.compose(&self.camera.carm_from_optical);
+        out.outside_volume = 0;
         for i in 0..n {
             let (u, v) = (line.u[i], line.v[i]);
             if !(u.is_finite() && v.is_finite()) || line.strength[i] < self.min_strength {
@@ -143,6 +159,10 @@ impl Triangulator {
             }
             let Some(p) = self.point_optical(f64::from(u), f64::from(v)) else { continue };
             let q = table_from_optical.transform_point(p);
+            if q.z < self.z_range.0 || q.z > self.z_range.1 {
+                out.outside_volume += 1;
+                continue;
+            }
             out.points[i] = [q.x as f32, q.y as f32, q.z as f32];
             out.intensity[i] = line.strength[i];
             out.range[i] = p.norm() as f32;
@@ -198,6 +218,27 @@ mod tests {
             let err = (Vec3::new(r[0].into(), r[1].into(), r[2].into()) - p_table).norm();
             prop_assert!(err < 1e-4, "f32 path error {}", err);
         }
+    }
+
+    #[test]
+    fn points_outside_the_measurement_volume_are_rejected() {
+        let g = geometry();
+        let tri = Triangulator::new(g.clone(), &TriangulatorConfig { max_z_m: 0.1, ..Default::default() }).unwrap();
+        let pose = table_from_carm(0.0, 0.0, 0.0);
+        let mut line = LaserLine::default();
+        for z in [0.05, 0.2, -0.05] {
+            let p_opt = g.carm_from_optical.inverse().transform_point(Vec3::new(0.0, 0.0, z));
+            let (u, v) = g.model.project(p_opt).unwrap();
+            line.u.push(u as f32);
+            line.v.push(v as f32);
+            line.strength.push(50.0);
+            line.width.push(3.0);
+        }
+        let mut prof = Profile::default();
+        tri.triangulate(&line, &pose, &mut prof);
+        assert!(prof.points[0][0].is_finite());
+        assert!(prof.points[1][0].is_nan() && prof.points[2][0].is_nan());
+        assert_eq!(prof.outside_volume, 2);
     }
 
     #[test]

@@ -150,6 +150,7 @@ pub fn cloud_profile(c: &PointCloud2) -> Result<Profile, pointcloud::CloudError>
         intensity: pts.iter().map(|p| p.intensity.unwrap_or(0.0)).collect(),
         rgb: has_rgb.then(|| pts.iter().map(|p| p.rgb.unwrap_or(0)).collect()),
         range: vec![f32::NAN; pts.len()],
+        outside_volume: 0,
     })
 }
 

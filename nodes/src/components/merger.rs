@@ -130,6 +130,7 @@ impl MergerNode {
                 intensity: col(&|p| p.intensity.unwrap_or(0.0)),
                 rgb: has_rgb.then(|| (0..h).map(|r| pts[r * w + c].rgb.unwrap_or(0)).collect()),
                 range: vec![f32::NAN; h],
+                outside_volume: 0,
             };
             let _ = g.push(c as i64, &p);
         }

@@ -222,6 +222,7 @@ impl MesherNode {
                 intensity: vec![0.0; p.points.len()],
                 rgb: None,
                 range: vec![f32::NAN; p.points.len()],
+                outside_volume: 0,
             };
             for _ in 0..missing.min(MAX_GAP_COLUMNS) {
                 let _ = self.grid.push(stamp, &empty);

@@ -33,6 +33,18 @@ pub fn declarations() -> Vec<ParamDecl> {
             "camera rays meeting the plane at a smaller angle are rejected",
         ),
         decl("min_strength", V::Double(0.0), "grey levels", "line samples weaker than this are dropped"),
+        decl(
+            "min_z_m",
+            V::Double(-0.01),
+            "m",
+            "points lower than this above the tabletop are rejected (nothing below it can be seen)",
+        ),
+        decl(
+            "max_z_m",
+            V::Double(0.6),
+            "m",
+            "points higher than this above the tabletop are rejected (top of the measurement volume)",
+        ),
         decl("table_frame", V::String("table".into()), "", "the fixed frame points are placed in"),
         decl("carm_frame", V::String("carm".into()), "", "the C-arm frame the laser plane is given in"),
         decl(
@@ -71,6 +83,10 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     if !(0.0..90.0).contains(&angle) {
         return Err(Params::invalid("min_ray_plane_angle_deg", format!("{angle} is not in [0, 90)")));
     }
+    let (lo, hi) = (p.f64("min_z_m")?, p.f64("max_z_m")?);
+    if !(lo < hi) {
+        return Err(Params::invalid("max_z_m", format!("{hi} must be above min_z_m {lo}")));
+    }
     let gap = p.f64("max_pose_gap_s")?;
     if !(gap > 0.0 && gap < 3600.0) {
         return Err(Params::invalid("max_pose_gap_s", format!("{gap} is not in (0, 3600)")));
@@ -84,6 +100,8 @@ fn config(p: &Params) -> Result<Config, ParamError> {
             laser_plane: plane,
             min_ray_plane_angle_deg: angle,
             min_strength: p.f64("min_strength")? as f32,
+            min_z_m: p.f64("min_z_m")?,
+            max_z_m: p.f64("max_z_m")?,
         },
         table_frame: p.string("table_frame")?,
         carm_frame: p.string("carm_frame")?,
@@ -104,6 +122,7 @@ pub struct TriangulatorNode {
     profiles: u64,
     points: u64,
     unplaced: u64,
+    outside_volume: u64,
 }
 
 const IN_LINE: usize = 0;
@@ -128,6 +147,7 @@ impl TriangulatorNode {
             profiles: 0,
             points: 0,
             unplaced: 0,
+            outside_volume: 0,
         })
     }
 
@@ -178,6 +198,7 @@ impl TriangulatorNode {
             tri.triangulate(&core, &pose, &mut self.profile);
             self.profiles += 1;
             self.points += self.profile.valid() as u64;
+            self.outside_volume += u64::from(self.profile.outside_volume);
             let cloud: PointCloud2 =
                 convert::profile_cloud(&self.profile, convert::header(stamp, &self.cfg.table_frame));
             out.publish(0, Msg::Cloud(Arc::new(cloud)));
