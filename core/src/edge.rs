@@ -10,6 +10,7 @@
 //! [`Method::Gradient`] is the reference study's method (a five-pixel gradient above a fixed
 //! threshold, integer pixels), kept so that the improvement can be measured.
 
+use crate::geom::solve3;
 use crate::image::{Encoding, ImageError, ImageView};
 use serde::{Deserialize, Serialize};
 
@@ -508,27 +509,6 @@ fn gaussian_fit<S: Sample>(p: &[S], m: usize, bg: f32, strength: f32, cfg: &Edge
     }
     let off = (-b / (2.0 * c)).clamp(-(max_hw as f64), max_hw as f64);
     Some((m as f64 + off) as f32)
-}
-
-/// Solves a 3x3 linear system by Cramer's rule; `None` when singular.
-fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
-    let det = |m: &[[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(&a);
-    if !d.is_finite() || d.abs() < 1e-12 {
-        return None;
-    }
-    let mut out = [0.0; 3];
-    for (k, o) in out.iter_mut().enumerate() {
-        let mut ak = a;
-        for r in 0..3 {
-            ak[r][k] = b[r];
-        }
-        *o = det(&ak) / d;
-    }
-    Some(out)
 }
 
 /// The study's method: first rise over five samples above the threshold; integer position.

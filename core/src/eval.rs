@@ -1,7 +1,7 @@
 //! Accuracy against ground truth: distance of reconstructed points from the true surface,
 //! coverage of the observable truth, and the pyramid's measured extents.
 
-use crate::geom::Vec3;
+use crate::geom::{solve3, Vec3};
 use crate::synth::scene::{pyramid_faces, Scene, Shape};
 use std::collections::HashMap;
 
@@ -162,26 +162,6 @@ pub fn pyramid_extents(scene: &Scene, points: &[[f32; 3]]) -> Option<PyramidExte
         py[1] * y + py[2]
     };
     Some(PyramidExtents { base_x_m: base_x, base_y_m: base_y, height_m: 0.5 * (hx + hy) })
-}
-
-fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
-    let det = |m: &[[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(&a);
-    if d.abs() < 1e-18 {
-        return None;
-    }
-    let mut out = [0.0; 3];
-    for (k, o) in out.iter_mut().enumerate() {
-        let mut m = a;
-        for r in 0..3 {
-            m[r][k] = b[r];
-        }
-        *o = det(&m) / d;
-    }
-    Some(out)
 }
 
 #[cfg(test)]

@@ -8,8 +8,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use xsurf_formats::bag::Bag;
 use xsurf_runtime::component::{Msg, QosClass};
-use xsurf_runtime::dds::{self, DdsEnv, HostConfig};
-use xsurf_runtime::params::Params;
+use xsurf_runtime::dds::{self, DdsEnv};
 
 /// Options of `bag play`.
 #[derive(Debug, Clone)]
@@ -36,17 +35,7 @@ pub fn play(dir: &Path, opts: &PlayOptions) -> anyhow::Result<u64> {
     let bag = Bag::open(dir)?;
     let env = DdsEnv::from_env(|k| std::env::var(k).ok())?;
     let ctx = env.context()?;
-    let cfg = HostConfig {
-        name: "xsurf_bag_player".into(),
-        namespace: "/".into(),
-        remaps: vec![],
-        decls: vec![],
-        params: Params::default(),
-        validate: Arc::new(|_| Ok(())),
-        rosout: false,
-        tick_period: Duration::from_millis(50),
-    };
-    let mut node = dds::create_node(&ctx, &cfg, None)?;
+    let mut node = dds::tool_node(&ctx, "xsurf_bag_player")?;
     let mut topics = BTreeMap::new();
     for t in &bag.metadata.topics {
         if !opts.topics.is_empty() && !opts.topics.contains(&t.name) {

@@ -10,8 +10,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use xsurf_formats::bag::{BagOptions, BagWriter, Qos};
 use xsurf_runtime::component::{Msg, QosClass};
-use xsurf_runtime::dds::{self, DdsEnv, HostConfig};
-use xsurf_runtime::params::Params;
+use xsurf_runtime::dds::{self, DdsEnv};
 
 /// Options of `bag record`.
 #[derive(Debug, Clone)]
@@ -51,17 +50,7 @@ pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
     }
     let env = DdsEnv::from_env(|k| std::env::var(k).ok())?;
     let ctx = env.context()?;
-    let cfg = HostConfig {
-        name: "xsurf_bag_recorder".into(),
-        namespace: "/".into(),
-        remaps: vec![],
-        decls: vec![],
-        params: Params::default(),
-        validate: Arc::new(|_| Ok(())),
-        rosout: false,
-        tick_period: Duration::from_millis(50),
-    };
-    let mut node = dds::create_node(&ctx, &cfg, None)?;
+    let mut node = dds::tool_node(&ctx, "xsurf_bag_recorder")?;
     let mut writer = BagWriter::create(dir, BagOptions { zstd: opts.zstd })?;
     let stop = Arc::new(AtomicBool::new(false));
     {

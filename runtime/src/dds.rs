@@ -388,6 +388,21 @@ pub struct HostConfig {
     pub tick_period: Duration,
 }
 
+/// A node with no parameters of its own, for tools (`bag play`, `bag record`).
+pub fn tool_node(ctx: &Context, name: &str) -> Result<DdsNode, HostError> {
+    let cfg = HostConfig {
+        name: name.to_string(),
+        namespace: "/".into(),
+        remaps: vec![],
+        decls: vec![],
+        params: Params::default(),
+        validate: Arc::new(|_| Ok(())),
+        rosout: false,
+        tick_period: Duration::from_millis(50),
+    };
+    create_node(ctx, &cfg, None)
+}
+
 /// Creates the node (parameters declared, services on, `/rosout`) in `ctx`.
 pub fn create_node(
     ctx: &Context,
