@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S]
-//! xsurf synth SCENE -o DIR [--size WxH] [--speed M_S] [--fps F] [--encoding E] [--seed N] [--zstd]
+//! xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding E] [--seed N] [--zstd]
 //! xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
 //! xsurf bag info DIR
 //! xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--duration S]
@@ -24,7 +24,7 @@ use xsurf_nodes::{offline, synth};
 const USAGE: &str = "usage:
   xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S]
       synthesize a scan, reconstruct it, write the files and report the accuracy (default out: ./xsurf-demo)
-  xsurf synth SCENE -o DIR [--size WxH] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--zstd]
+  xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--zstd]
       write a synthetic scan as a rosbag2 bag plus its ground truth (scenes: pyramid, phantom, sphere, cylinder, box, body)
   xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
       reconstruct a recorded scan offline: DIR/<cam>.ply, merged.ply, scene.wrl, scene.glb, report.json
@@ -123,7 +123,19 @@ fn scanner(a: &Args, scene: &str) -> anyhow::Result<Scanner> {
         encoding,
         ..ScanSettings::default()
     };
-    Ok(Scanner::new(scene, Rig::study(w, h), LaserModel::default(), settings)?)
+    let rig = match a.get("--rig") {
+        None => Rig::study(w, h),
+        Some(f) => {
+            let text = std::fs::read_to_string(f).with_context(|| format!("--rig {f}"))?;
+            let rig: Rig = serde_yaml::from_str(&text)
+                .with_context(|| format!("--rig {f}: not a rig file (see launch-config/rig_study.yaml)"))?;
+            if a.get("--size").is_some() {
+                return Err(usage("--size and --rig: the rig file gives each camera's image size"));
+            }
+            rig
+        }
+    };
+    Ok(Scanner::new(scene, rig, LaserModel::default(), settings)?)
 }
 
 fn progress_printer(label: &'static str) -> impl FnMut(u32, u32) {
@@ -137,7 +149,11 @@ fn progress_printer(label: &'static str) -> impl FnMut(u32, u32) {
 }
 
 fn cmd_synth(args: &[String]) -> anyhow::Result<()> {
-    let a = Args::parse(args, &["--zstd"], &["-o", "--out", "--size", "--speed", "--fps", "--encoding", "--seed"])?;
+    let a = Args::parse(
+        args,
+        &["--zstd"],
+        &["-o", "--out", "--size", "--speed", "--fps", "--encoding", "--seed", "--rig"],
+    )?;
     let [scene] = a.positional.as_slice() else { return Err(usage("synth needs one SCENE")) };
     let out = a.get("-o").or(a.get("--out")).ok_or_else(|| usage("synth needs -o DIR"))?;
     let s = scanner(&a, scene)?;
