@@ -637,7 +637,23 @@ fn fill_profile(
     };
     if vertical {
         let row = image.row(s);
-        buf.extend(inner.map(|x| pixel(row, x as usize)));
+        let (x0, x1) = (inner.start as usize, inner.end as usize);
+        match (enc, channel) {
+            // Colour rows, the common cases: one pass over 3-byte pixels, no per-pixel dispatch.
+            (Encoding::Rgb8 | Encoding::Bgr8, Channel::Red) => {
+                let r = if enc == Encoding::Rgb8 { 0 } else { 2 };
+                buf.extend(row[3 * x0..3 * x1].chunks_exact(3).map(|p| f32::from(p[r])));
+            }
+            (Encoding::Rgb8 | Encoding::Bgr8, Channel::RedMinusOthers) => {
+                let (r, b) = if enc == Encoding::Rgb8 { (0, 2) } else { (2, 0) };
+                buf.extend(
+                    row[3 * x0..3 * x1]
+                        .chunks_exact(3)
+                        .map(|p| (f32::from(p[r]) - 0.5 * (f32::from(p[1]) + f32::from(p[b]))).max(0.0)),
+                );
+            }
+            _ => buf.extend(inner.map(|x| pixel(row, x as usize))),
+        }
     } else {
         buf.extend(inner.map(|y| pixel(image.row(y), s as usize)));
     }
