@@ -141,17 +141,57 @@ pub fn profile_cloud(p: &Profile, header: Header) -> PointCloud2 {
     })
 }
 
-/// A profile from a one-frame cloud (the mesher's input). Range is not carried: NaN.
-pub fn cloud_profile(c: &PointCloud2) -> Result<Profile, pointcloud::CloudError> {
+/// An organized cloud as a grid: one profile per column (range is not carried: NaN). Grey
+/// cameras send rgb 0; then no colour is kept and meshes take their grey from the strength.
+pub fn cloud_grid(c: &PointCloud2) -> Result<Grid, pointcloud::CloudError> {
     let pts = pointcloud::read(c)?;
+    let (h, w) = (c.height as usize, c.width as usize);
     let has_rgb = pts.iter().any(|p| p.rgb.is_some_and(|v| v != 0));
+    let mut g = Grid::new(h);
+    for col in 0..w {
+        let at = |r: usize| &pts[r * w + col];
+        let p = Profile {
+            points: (0..h).map(|r| at(r).xyz).collect(),
+            intensity: (0..h).map(|r| at(r).intensity.unwrap_or(0.0)).collect(),
+            rgb: has_rgb.then(|| (0..h).map(|r| at(r).rgb.unwrap_or(0)).collect()),
+            range: vec![f32::NAN; h],
+            outside_volume: 0,
+        };
+        // Every column has h samples, so the push cannot be refused.
+        let _ = g.push(col as i64, &p);
+    }
+    Ok(g)
+}
+
+/// Why a profile cloud cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ProfileError {
+    /// The cloud itself is malformed.
+    #[error(transparent)]
+    Cloud(#[from] pointcloud::CloudError),
+    /// A profile is one frame: one column.
+    #[error("a profile has width 1 (one frame), got width {0}")]
+    Width(u32),
+}
+
+/// A profile from a one-frame cloud (the mesher's input).
+pub fn cloud_profile(c: &PointCloud2) -> Result<Profile, ProfileError> {
+    if c.width != 1 {
+        return Err(ProfileError::Width(c.width));
+    }
+    let g = cloud_grid(c)?;
     Ok(Profile {
-        points: pts.iter().map(|p| p.xyz).collect(),
-        intensity: pts.iter().map(|p| p.intensity.unwrap_or(0.0)).collect(),
-        rgb: has_rgb.then(|| pts.iter().map(|p| p.rgb.unwrap_or(0)).collect()),
-        range: vec![f32::NAN; pts.len()],
+        points: g.points().to_vec(),
+        intensity: g.intensity().to_vec(),
+        rgb: g.has_rgb().then(|| g.rgb().to_vec()),
+        range: g.range().to_vec(),
         outside_volume: 0,
     })
+}
+
+/// `sec.nanosec` of a stamp, for messages.
+pub fn fmt_stamp(ns: i64) -> String {
+    format!("{}.{:09}", ns.div_euclid(1_000_000_000), ns.rem_euclid(1_000_000_000))
 }
 
 /// The organized grid so far: height = samples per frame, width = frames.
@@ -216,6 +256,36 @@ mod tests {
         let back = iso(&transform_stamped(0, "carm", "cam1_optical_frame", &t).transform);
         let p = Vec3::new(0.3, -0.2, 0.5);
         assert!((back.transform_point(p) - t.transform_point(p)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn organized_clouds_read_back_as_grids_and_profiles() {
+        let mut g = Grid::new(3);
+        for f in 0..2 {
+            let p = Profile {
+                points: (0..3).map(|s| [s as f32, f as f32, 0.0]).collect(),
+                intensity: vec![50.0; 3],
+                rgb: None,
+                range: vec![1.0; 3],
+                outside_volume: 0,
+            };
+            g.push(f, &p).unwrap();
+        }
+        let back = cloud_grid(&grid_cloud(&g, Header::default())).unwrap();
+        assert_eq!(back.points(), g.points());
+        assert!(!back.has_rgb(), "grey stays grey");
+        let wide = grid_cloud(&g, Header::default());
+        assert!(matches!(cloud_profile(&wide), Err(ProfileError::Width(2))));
+        let mut colour = Grid::new(3);
+        let red = Profile {
+            points: vec![[1.0; 3]; 3],
+            intensity: vec![1.0; 3],
+            rgb: Some(vec![0x00ff0000; 3]),
+            range: vec![0.0; 3],
+            outside_volume: 0,
+        };
+        colour.push(0, &red).unwrap();
+        assert_eq!(cloud_profile(&grid_cloud(&colour, Header::default())).unwrap().rgb, Some(vec![0x00ff0000; 3]));
     }
 
     #[test]

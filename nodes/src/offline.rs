@@ -252,7 +252,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             Ok(msg) => msg,
             Err(e) => {
                 *report.undecodable.entry(m.topic.clone()).or_default() += 1;
-                log::warn!("{} at {}: {e}", m.topic, crate::components::triangulator::fmt_stamp(m.log_time_ns as i64));
+                log::warn!("{} at {}: {e}", m.topic, crate::convert::fmt_stamp(m.log_time_ns as i64));
                 continue;
             }
         };

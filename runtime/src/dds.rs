@@ -166,7 +166,7 @@ enum Pub {
 
 impl Pub {
     fn publish(&self, m: &Msg) -> Result<(), String> {
-        let r = match (self, m) {
+        match (self, m) {
             (Pub::Image(p), Msg::Image(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
             (Pub::CameraInfo(p), Msg::CameraInfo(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
             (Pub::Tf(p), Msg::Tf(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
@@ -177,8 +177,7 @@ impl Pub {
             (Pub::JointState(p), Msg::JointState(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
             (Pub::Clock(p), Msg::Clock(m)) => p.publish(**m).map_err(|e| format!("{e:?}")),
             (_, m) => Err(format!("a {} does not fit this publisher", m.type_name())),
-        };
-        r
+        }
     }
 }
 
@@ -192,14 +191,14 @@ enum Event {
 /// The node's DDS side: publishers by topic name (so other hosts, like bag play, can use it).
 pub struct DdsNode {
     node: Node,
-    pubs: Vec<(String, Pub)>,
+    pubs: Publishers,
 }
 
 impl DdsNode {
     /// Creates a publisher on `topic` for `type_name` with the class's QoS.
     pub fn add_publisher(&mut self, topic: &str, type_name_full: &str, class: QosClass) -> Result<(), HostError> {
         let p = self.make_publisher(topic, type_name_full, qos(class))?;
-        self.pubs.push((topic.to_string(), p));
+        self.pubs.0.push((topic.to_string(), p));
         Ok(())
     }
 
@@ -227,8 +226,7 @@ impl DdsNode {
 
     /// Publishes on a topic added with [`DdsNode::add_publisher`].
     pub fn publish(&self, topic: &str, m: &Msg) -> Result<(), String> {
-        let p = self.pubs.iter().find(|(t, _)| t == topic).ok_or_else(|| format!("no publisher on {topic}"))?;
-        p.1.publish(m)
+        self.pubs.publish(topic, m)
     }
 
     /// The ros2-client node.
@@ -449,7 +447,7 @@ pub fn create_node(
     let node_name = NodeName::new(&cfg.namespace, &cfg.name)
         .map_err(|e| HostError::Dds(format!("node name {}/{}: {e:?}", cfg.namespace, cfg.name)))?;
     let node = ctx.new_node(node_name, opts).map_err(|e| HostError::Dds(format!("node: {e:?}")))?;
-    Ok(DdsNode { node, pubs: Vec::new() })
+    Ok(DdsNode { node, pubs: Publishers::default() })
 }
 
 /// The host's own parameters, declared on every node: QoS by topic class, read at start-up.

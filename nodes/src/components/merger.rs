@@ -11,7 +11,7 @@ use crate::convert;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
-use xsurf_core::mesh::{mesh_grid, Grid, Mesh, MeshConfig};
+use xsurf_core::mesh::{mesh_grid, Mesh, MeshConfig};
 use xsurf_formats::scene::{Scene, Surface};
 use xsurf_msgs::pointcloud;
 use xsurf_msgs::sensor_msgs::PointCloud2;
@@ -116,27 +116,6 @@ impl MergerNode {
         })
     }
 
-    fn grid_of(cloud: &PointCloud2) -> Result<Grid, pointcloud::CloudError> {
-        let pts = pointcloud::read(cloud)?;
-        let (h, w) = (cloud.height as usize, cloud.width as usize);
-        // Grey cameras send rgb 0: then the vertices take their grey from the laser strength.
-        let has_rgb = pts.iter().any(|p| p.rgb.is_some_and(|c| c != 0));
-        let mut g = Grid::new(h);
-        for c in 0..w {
-            let col =
-                |f: &dyn Fn(&pointcloud::CloudPoint) -> f32| (0..h).map(|r| f(&pts[r * w + c])).collect::<Vec<_>>();
-            let p = xsurf_core::triangulate::Profile {
-                points: (0..h).map(|r| pts[r * w + c].xyz).collect(),
-                intensity: col(&|p| p.intensity.unwrap_or(0.0)),
-                rgb: has_rgb.then(|| (0..h).map(|r| pts[r * w + c].rgb.unwrap_or(0)).collect()),
-                range: vec![f32::NAN; h],
-                outside_volume: 0,
-            };
-            let _ = g.push(c as i64, &p);
-        }
-        Ok(g)
-    }
-
     fn merge(&mut self, out: &mut Outbox) {
         self.pending_deadline = None;
         if self.clouds.is_empty() {
@@ -146,7 +125,7 @@ impl MergerNode {
         let mut stamp = 0;
         for (&i, cloud) in &self.clouds {
             stamp = stamp.max(cloud.header.stamp.nanos());
-            match Self::grid_of(cloud) {
+            match convert::cloud_grid(cloud) {
                 Ok(g) => meshes.push((self.cfg.cameras[i].clone(), mesh_grid(&g, &self.cfg.mesh))),
                 Err(e) => {
                     self.bad_clouds += 1;

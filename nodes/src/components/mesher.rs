@@ -212,11 +212,7 @@ impl MesherNode {
         let missing = self.gaps.missing(stamp, self.cfg.gap_factor);
         if missing > 0 {
             self.dropped_frames += u64::from(missing);
-            log::warn!(
-                "{}: {missing} frame(s) missing before {} (stamp gap)",
-                self.camera,
-                super::triangulator::fmt_stamp(stamp)
-            );
+            log::warn!("{}: {missing} frame(s) missing before {} (stamp gap)", self.camera, convert::fmt_stamp(stamp));
             let empty = Profile {
                 points: vec![[f32::NAN; 3]; p.points.len()],
                 intensity: vec![0.0; p.points.len()],

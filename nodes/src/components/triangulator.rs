@@ -185,7 +185,7 @@ impl TriangulatorNode {
                 Ok(p) => p,
                 Err(e) => {
                     self.unplaced += 1;
-                    return Err(NodeError::new(format!("laser_line at {}: {e}", fmt_stamp(stamp))));
+                    return Err(NodeError::new(format!("laser_line at {}: {e}", convert::fmt_stamp(stamp))));
                 }
             };
             let core = convert::core_line(&line).map_err(NodeError::new)?;
@@ -205,11 +205,6 @@ impl TriangulatorNode {
         }
         Ok(())
     }
-}
-
-/// `sec.nanosec` for messages.
-pub fn fmt_stamp(ns: i64) -> String {
-    format!("{}.{:09}", ns.div_euclid(1_000_000_000), ns.rem_euclid(1_000_000_000))
 }
 
 impl Component for TriangulatorNode {
