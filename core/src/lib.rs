@@ -8,6 +8,7 @@
 //! - [`pose`]: `table -> carm` over time, interpolated at image stamps;
 //! - [`mesh`]: the organized grid (samples x frames) and its triangulation and smoothing;
 //! - [`synth`]: the synthetic scanner, which renders scans and knows the true surface;
+//! - [`xray`]: the radiograph's grey levels, cropping and placement in `table`;
 //! - [`eval`]: accuracy and coverage against that truth.
 //!
 //! ```
@@ -36,3 +37,4 @@ pub mod pose;
 pub mod rig;
 pub mod synth;
 pub mod triangulate;
+pub mod xray;

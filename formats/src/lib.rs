@@ -8,6 +8,7 @@
 #![deny(missing_docs)]
 
 pub mod bag;
+pub mod dicom;
 pub mod gltf;
 pub mod image;
 pub mod ply;

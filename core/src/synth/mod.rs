@@ -3,6 +3,7 @@
 //! laser sheet). Deterministic for a seed.
 
 pub mod scene;
+pub mod xray;
 
 use crate::camera::CameraModel;
 use crate::geom::{Iso3, Plane, Vec3};

@@ -83,6 +83,11 @@ pub struct Object {
     pub color: [f64; 3],
     /// Optional printed band.
     pub band: Option<Band>,
+    /// Linear X-ray attenuation, 1/m, added to whatever else the ray crosses at the same place
+    /// (an object inside another adds its excess over the outer one: bone in soft tissue).
+    pub mu_per_m: f64,
+    /// Hidden inside another object: seen by X-rays only, never by a camera or the laser.
+    pub internal: bool,
 }
 
 /// A ray hit.
@@ -115,14 +120,45 @@ pub const SCENE_NAMES: [&str; 6] = ["pyramid", "phantom", "sphere", "cylinder", 
 const WHITE: [f64; 3] = [0.92, 0.92, 0.9];
 const EPS: f64 = 1e-9;
 
+/// Attenuation of soft tissue (water at about 70 keV), 1/m.
+pub const MU_TISSUE: f64 = 20.0;
+/// Excess attenuation of bone over soft tissue, 1/m.
+pub const MU_BONE_EXCESS: f64 = 30.0;
+/// Attenuation of the tabletop (carbon fibre sandwich), 1/m.
+const MU_TABLE: f64 = 4.0;
+/// Thickness of the tabletop for X-rays, metres.
+pub const TABLE_THICKNESS_M: f64 = 0.02;
+
 fn table(y_min: f64, y_max: f64) -> Object {
-    Object { shape: Shape::Table { half_x: 0.35, y_min, y_max }, albedo: 0.85, color: WHITE, band: None }
+    Object {
+        shape: Shape::Table { half_x: 0.35, y_min, y_max },
+        albedo: 0.85,
+        color: WHITE,
+        band: None,
+        mu_per_m: MU_TABLE,
+        internal: false,
+    }
 }
 
 impl Scene {
     /// A scene by name, or `None` (see [`SCENE_NAMES`]).
     pub fn by_name(name: &str) -> Option<Scene> {
-        let obj = |shape, albedo, color| Object { shape, albedo, color, band: None };
+        let obj = |shape, albedo, color| Object {
+            shape,
+            albedo,
+            color,
+            band: None,
+            mu_per_m: MU_TISSUE,
+            internal: false,
+        };
+        let bone = |shape| Object {
+            shape,
+            albedo: 0.0,
+            color: [0.0; 3],
+            band: None,
+            mu_per_m: MU_BONE_EXCESS,
+            internal: true,
+        };
         let (objects, start, end) = match name {
             // The study's calibration pyramid: base 210 x 297 mm, 86 mm high.
             "pyramid" => (
@@ -134,8 +170,9 @@ impl Scene {
                 -0.18,
                 0.18,
             ),
+            // Off the beam's centre, so that the fan beam's magnification across the table matters.
             "sphere" => (
-                vec![obj(Shape::Sphere { center: Vec3::new(0.0, 0.0, 0.08), radius: 0.08 }, 0.7, [0.7, 0.75, 0.85])],
+                vec![obj(Shape::Sphere { center: Vec3::new(0.06, 0.0, 0.08), radius: 0.08 }, 0.7, [0.7, 0.75, 0.85])],
                 -0.12,
                 0.12,
             ),
@@ -154,6 +191,8 @@ impl Scene {
                     albedo: 0.7,
                     color: [0.85, 0.85, 0.8],
                     band: Some(Band { y_min: -0.02, y_max: 0.02, albedo: 0.12 }),
+                    mu_per_m: MU_TISSUE,
+                    internal: false,
                 }];
                 if name == "phantom" {
                     v.push(obj(
@@ -184,6 +223,13 @@ impl Scene {
                         e([0.21, 0.55, 0.045], [0.045, 0.30, 0.045]),
                         e([-0.08, 1.15, 0.065], [0.07, 0.40, 0.065]),
                         e([0.08, 1.15, 0.065], [0.07, 0.40, 0.065]),
+                        // Bones, for the radiograph: skull, spine, humeri, femurs.
+                        bone(Shape::Ellipsoid { center: Vec3::new(0.0, 0.10, 0.09), radii: Vec3::new(0.065, 0.09, 0.08) }),
+                        bone(Shape::CylinderY { x: 0.0, z: 0.06, radius: 0.015, y_min: 0.20, y_max: 0.78 }),
+                        bone(Shape::CylinderY { x: -0.21, z: 0.045, radius: 0.012, y_min: 0.30, y_max: 0.80 }),
+                        bone(Shape::CylinderY { x: 0.21, z: 0.045, radius: 0.012, y_min: 0.30, y_max: 0.80 }),
+                        bone(Shape::CylinderY { x: -0.08, z: 0.065, radius: 0.016, y_min: 0.80, y_max: 1.50 }),
+                        bone(Shape::CylinderY { x: 0.08, z: 0.065, radius: 0.016, y_min: 0.80, y_max: 1.50 }),
                     ],
                     -0.03,
                     1.58,
@@ -199,7 +245,7 @@ impl Scene {
     /// The nearest hit along `origin + t * dir` with `t_min < t < t_max` (`dir` need not be unit).
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_min: f64, t_max: f64) -> Option<Hit> {
         let mut best: Option<Hit> = None;
-        for (i, o) in self.objects.iter().enumerate() {
+        for (i, o) in self.objects.iter().enumerate().filter(|(_, o)| !o.internal) {
             let limit = best.map_or(t_max, |b| b.t);
             if let Some((t, normal)) = intersect_shape(&o.shape, origin, dir, t_min, limit) {
                 best = Some(Hit { t, normal, object: i });
@@ -216,12 +262,21 @@ impl Scene {
             return false;
         }
         let dir = d / len;
-        self.objects.iter().any(|o| intersect_shape(&o.shape, a, dir, eps, len - eps).is_some())
+        self.objects.iter().any(|o| !o.internal && intersect_shape(&o.shape, a, dir, eps, len - eps).is_some())
     }
 
     /// Signed distance from `p` to the scene's surface (negative inside a solid).
     pub fn signed_distance(&self, p: Vec3) -> f64 {
-        self.objects.iter().map(|o| sdf(&o.shape, p)).fold(f64::INFINITY, f64::min)
+        self.objects.iter().filter(|o| !o.internal).map(|o| sdf(&o.shape, p)).fold(f64::INFINITY, f64::min)
+    }
+
+    /// The X-ray attenuation integral along the segment from `a` to `b`: the sum over objects
+    /// of `mu_per_m` times the length of the segment inside each (dimensionless; the detected
+    /// fraction of the beam is `exp(-value)`).
+    pub fn attenuation(&self, a: Vec3, b: Vec3) -> f64 {
+        let d = b - a;
+        let len = d.norm();
+        self.objects.iter().map(|o| o.mu_per_m * len * chord(&o.shape, a, d).map_or(0.0, |(t0, t1)| t1 - t0)).sum()
     }
 
     /// Reflectance of object `i` at `p` (bands and a faint surface texture included).
@@ -428,6 +483,76 @@ fn point_triangle_distance(p: Vec3, tri: &[Vec3; 3]) -> f64 {
     (p - (a + ab * (vb * denom) + ac * (vc * denom))).norm()
 }
 
+/// The parameter interval `[t0, t1]` within `[0, 1]` of the segment `o + t d` inside `shape`.
+fn chord(shape: &Shape, o: Vec3, d: Vec3) -> Option<(f64, f64)> {
+    // Roots of a t^2 + 2 b t + c = 0 as an interval.
+    let quad = |a: f64, b: f64, c: f64| -> Option<(f64, f64)> {
+        if a < EPS * EPS {
+            return (c <= 0.0).then_some((f64::NEG_INFINITY, f64::INFINITY));
+        }
+        let disc = b * b - a * c;
+        (disc > 0.0).then(|| ((-b - disc.sqrt()) / a, (-b + disc.sqrt()) / a))
+    };
+    // The slab lo <= o + t d <= hi along one axis.
+    let slab = |o: f64, d: f64, lo: f64, hi: f64| -> Option<(f64, f64)> {
+        if d.abs() < EPS {
+            return (o >= lo && o <= hi).then_some((f64::NEG_INFINITY, f64::INFINITY));
+        }
+        let (a, b) = ((lo - o) / d, (hi - o) / d);
+        Some((a.min(b), a.max(b)))
+    };
+    let meet = |a: Option<(f64, f64)>, b: Option<(f64, f64)>| -> Option<(f64, f64)> {
+        let (a, b) = (a?, b?);
+        let r = (a.0.max(b.0), a.1.min(b.1));
+        (r.0 < r.1).then_some(r)
+    };
+    let interval = match *shape {
+        Shape::Table { half_x, y_min, y_max } => meet(
+            meet(slab(o.z, d.z, -TABLE_THICKNESS_M, 0.0), slab(o.x, d.x, -half_x, half_x)),
+            slab(o.y, d.y, y_min, y_max),
+        ),
+        Shape::Pyramid { center, base_x, base_y, height } => {
+            let mut r = slab(o.z, d.z, 0.0, f64::INFINITY);
+            for f in pyramid_faces(center, base_x, base_y, height) {
+                // Inside: n . (p - f0) <= 0 with the outward normal n.
+                let n = (f[1] - f[0]).cross(f[2] - f[0]);
+                let (num, den) = (n.dot(o - f[0]), n.dot(d));
+                let half = if den.abs() < EPS {
+                    (num <= 0.0).then_some((f64::NEG_INFINITY, f64::INFINITY))
+                } else if den > 0.0 {
+                    Some((f64::NEG_INFINITY, -num / den))
+                } else {
+                    Some((-num / den, f64::INFINITY))
+                };
+                r = meet(r, half);
+            }
+            r
+        }
+        Shape::Cuboid { center, half } => {
+            let lo = center - half;
+            let hi = center + half;
+            meet(meet(slab(o.x, d.x, lo.x, hi.x), slab(o.y, d.y, lo.y, hi.y)), slab(o.z, d.z, lo.z, hi.z))
+        }
+        Shape::Sphere { center, radius } => {
+            let oc = o - center;
+            quad(d.dot(d), oc.dot(d), oc.dot(oc) - radius * radius)
+        }
+        Shape::CylinderY { x, z, radius, y_min, y_max } => {
+            let (ox, oz) = (o.x - x, o.z - z);
+            meet(
+                quad(d.x * d.x + d.z * d.z, ox * d.x + oz * d.z, ox * ox + oz * oz - radius * radius),
+                slab(o.y, d.y, y_min, y_max),
+            )
+        }
+        Shape::Ellipsoid { center, radii } => {
+            let s = |v: Vec3| Vec3::new(v.x / radii.x, v.y / radii.y, v.z / radii.z);
+            let (oc, ds) = (s(o - center), s(d));
+            quad(ds.dot(ds), oc.dot(ds), oc.dot(oc) - 1.0)
+        }
+    };
+    meet(interval, Some((0.0, 1.0)))
+}
+
 fn sdf(shape: &Shape, p: Vec3) -> f64 {
     match *shape {
         Shape::Table { .. } => p.z,
@@ -494,6 +619,44 @@ mod tests {
             }
         }
         assert!(Scene::by_name("teapot").is_none());
+    }
+
+    #[test]
+    fn attenuation_is_mu_times_chord_length() {
+        let s = Scene::by_name("sphere").unwrap();
+        let (c, r) = (Vec3::new(0.06, 0.0, 0.08), 0.08);
+        // Straight down through the centre: the sphere's diameter plus the tabletop.
+        let a = s.attenuation(c + Vec3::Z, c - Vec3::Z);
+        assert!((a - (MU_TISSUE * 2.0 * r + MU_TABLE * TABLE_THICKNESS_M)).abs() < 1e-9, "{a}");
+        // Off-centre by r/2 horizontally through the sphere only: chord 2 sqrt(r^2 - (r/2)^2).
+        let off = c + Vec3::new(0.0, r / 2.0, 0.0);
+        let a = s.attenuation(off - Vec3::X * 0.5, off + Vec3::X * 0.5);
+        assert!((a - MU_TISSUE * 2.0 * (r * r * 0.75).sqrt()).abs() < 1e-9, "{a}");
+        // Segment ends inside count only the part between them; a miss counts nothing.
+        assert!((s.attenuation(c, c + Vec3::X) - MU_TISSUE * r).abs() < 1e-9);
+        assert_eq!(s.attenuation(Vec3::new(0.5, 0.5, 0.5), Vec3::new(0.6, 0.5, 0.5)), 0.0);
+        // The pyramid's vertical chord at the apex axis is its height; cuboid and cylinder likewise.
+        let p = Scene::by_name("pyramid").unwrap();
+        let a = p.attenuation(Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 0.0, 0.001));
+        assert!((a - MU_TISSUE * (0.086 - 0.001)).abs() < 1e-9, "{a}");
+        let b = Scene::by_name("phantom").unwrap();
+        let a = b.attenuation(Vec3::new(-0.06, -0.05, 1.0), Vec3::new(-0.06, -0.05, 0.0));
+        assert!((a - MU_TISSUE * 0.08).abs() < 1e-9, "{a}");
+        let a = b.attenuation(Vec3::new(0.1, 0.08, 1.0), Vec3::new(0.1, 0.08, 0.0));
+        assert!((a - MU_TISSUE * 0.07).abs() < 1e-9, "{a}");
+    }
+
+    #[test]
+    fn bones_are_seen_by_x_rays_only() {
+        let s = Scene::by_name("body").unwrap();
+        let femur = Vec3::new(0.08, 1.0, 0.065);
+        // The surface above the femur is the leg's, not the bone's.
+        let h = s.intersect(femur + Vec3::Z, -Vec3::Z, 1e-9, 10.0).unwrap();
+        assert!(!s.objects[h.object].internal);
+        assert!(s.signed_distance(femur) < -0.03);
+        let through = s.attenuation(femur + Vec3::Z * 0.5, femur - Vec3::Z * 0.04);
+        let beside = s.attenuation(femur + Vec3::new(0.04, 0.0, 0.5), femur + Vec3::new(0.04, 0.0, -0.04));
+        assert!(through > beside + MU_BONE_EXCESS * 0.02, "{through} {beside}");
     }
 
     #[test]
