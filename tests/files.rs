@@ -73,11 +73,11 @@ fn scene_with_surfaces_and_radiograph_passes_both_readers() {
             Surface { name: "cam1", mesh: &a, transparency: 0.3 },
             Surface { name: "cam2", mesh: &b, transparency: 0.0 },
         ],
-        plane: Some(TexturedPlane {
-            corners: [[-0.1, -0.1, -0.01], [0.2, -0.1, -0.01], [0.2, 0.2, -0.01], [-0.1, 0.2, -0.01]],
+        plane: Some(TexturedPlane::quad(
+            [[-0.1, -0.1, -0.01], [0.2, -0.1, -0.01], [0.2, 0.2, -0.01], [-0.1, 0.2, -0.01]],
             png,
-            file_name: "xray.png".into(),
-        }),
+            "xray.png",
+        )),
     };
     let glb = dir.join("scene.glb");
     let wrl = dir.join("scene.wrl");

@@ -164,9 +164,63 @@ pub fn pyramid_extents(scene: &Scene, points: &[[f32; 3]]) -> Option<PyramidExte
     Some(PyramidExtents { base_x_m: base_x, base_y_m: base_y, height_m: 0.5 * (hx + hy) })
 }
 
+/// A sphere fitted to points: centre, radius and RMS radial residual (metres).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SphereFit {
+    /// Centre.
+    pub center: Vec3,
+    /// Radius.
+    pub radius: f64,
+    /// RMS of |p - center| - radius.
+    pub rms_m: f64,
+}
+
+/// Least-squares sphere through `points` (algebraic fit: |p|^2 = 2 c.p + k, centred to drop
+/// k); `None` for fewer than 4 points or a degenerate (planar) set.
+pub fn fit_sphere(points: &[Vec3]) -> Option<SphereFit> {
+    if points.len() < 4 {
+        return None;
+    }
+    let n = points.len() as f64;
+    let mean = points.iter().fold(Vec3::ZERO, |a, &p| a + p) / n;
+    let q: Vec<(Vec3, f64)> = points.iter().map(|&p| (p - mean, (p - mean).norm_squared())).collect();
+    let mean_sq = q.iter().map(|x| x.1).sum::<f64>() / n;
+    let (mut a, mut b) = ([[0.0; 3]; 3], [0.0; 3]);
+    for (d, s) in &q {
+        let v = [d.x, d.y, d.z];
+        for i in 0..3 {
+            for j in 0..3 {
+                a[i][j] += 2.0 * v[i] * v[j];
+            }
+            b[i] += v[i] * (s - mean_sq);
+        }
+    }
+    let c = solve3(a, b)?;
+    let center = mean + Vec3::new(c[0], c[1], c[2]);
+    let radius = (points.iter().map(|&p| (p - center).norm_squared()).sum::<f64>() / n).sqrt();
+    let rms_m = (points.iter().map(|&p| ((p - center).norm() - radius).powi(2)).sum::<f64>() / n).sqrt();
+    Some(SphereFit { center, radius, rms_m })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sphere_fit_recovers_a_cap() {
+        // A cap (upper third) of a sphere, as the cameras see one resting on the table.
+        let c = Vec3::new(0.06, -0.01, 0.08);
+        let mut pts = Vec::new();
+        for i in 0..40 {
+            for j in 0..40 {
+                let (th, ph) = (0.05 * f64::from(i), std::f64::consts::TAU * f64::from(j) / 40.0);
+                pts.push(c + Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()) * 0.08);
+            }
+        }
+        let f = fit_sphere(&pts).unwrap();
+        assert!((f.center - c).norm() < 1e-9 && (f.radius - 0.08).abs() < 1e-9 && f.rms_m < 1e-9, "{f:?}");
+        assert!(fit_sphere(&pts[..3]).is_none());
+    }
 
     #[test]
     fn exact_pyramid_points_measure_exact_extents() {

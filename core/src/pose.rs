@@ -69,6 +69,10 @@ impl PoseTrack {
             max_extrapolation_ns: 5_000_000,
         }
     }
+    /// Most samples kept.
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
     /// Adds a sample; out-of-order samples are inserted in place, an equal stamp replaces.
     pub fn push(&mut self, stamp_ns: i64, t: &Iso3) {
         let entry = (stamp_ns, t.translation, t.quaternion());

@@ -246,13 +246,7 @@ pub struct DetectorGeometry {
 
 impl Default for DetectorGeometry {
     fn default() -> Self {
-        Self {
-            source_detector_m: 1.3,
-            pitch_m: 0.0005,
-            center_column: None,
-            flip_columns: false,
-            plane_height_m: 0.0,
-        }
+        Self { source_detector_m: 1.3, pitch_m: 0.0005, center_column: None, flip_columns: false, plane_height_m: 0.0 }
     }
 }
 
@@ -260,10 +254,7 @@ impl DetectorGeometry {
     /// Checks the values.
     pub fn validate(&self) -> Result<(), XrayError> {
         if !(self.source_detector_m.is_finite() && self.source_detector_m > 0.0) {
-            return Err(XrayError::Geometry(format!(
-                "source_detector_m {} must be positive",
-                self.source_detector_m
-            )));
+            return Err(XrayError::Geometry(format!("source_detector_m {} must be positive", self.source_detector_m)));
         }
         if !(self.pitch_m.is_finite() && self.pitch_m > 0.0) {
             return Err(XrayError::Geometry(format!("pitch_m {} must be positive", self.pitch_m)));
@@ -345,46 +336,52 @@ impl Placement {
     }
 
     /// The point in `table` of (`col`, `row`) with the pose looked up by `pose_at(stamp_ns)`.
-    pub fn point(
-        &self,
-        col: f64,
-        row: f64,
-        pose_at: &dyn Fn(i64) -> Result<Iso3, String>,
-    ) -> Result<Vec3, XrayError> {
+    pub fn point(&self, col: f64, row: f64, pose_at: &dyn Fn(i64) -> Result<Iso3, String>) -> Result<Vec3, XrayError> {
         let stamp_ns = self.row_stamp(row);
         let pose = pose_at(stamp_ns).map_err(|reason| XrayError::Pose { row, stamp_ns, reason })?;
         self.point_with_pose(col, &pose)
     }
 
-    /// A grid over the columns `cols` and all rows: two vertices per row edge sampled at up to
-    /// `max_strips + 1` rows, texture coordinates with (0, 0) at the image's bottom-left (the
-    /// last row, first column) as VRML has them.
+    /// A grid over the columns `cols` and all rows, with up to `max_col_strips` x
+    /// `max_row_strips` cells (vertices at cell corners), texture coordinates with (0, 0) at the
+    /// image's bottom-left (the last row, first column) as VRML has them. Rows are sampled so
+    /// that the grid follows the travel (uneven speed included); columns so that vertex colours
+    /// can stand in for the texture.
     pub fn grid(
         &self,
         cols: Range<u32>,
-        max_strips: u32,
+        max_col_strips: u32,
+        max_row_strips: u32,
         pose_at: &dyn Fn(i64) -> Result<Iso3, String>,
     ) -> Result<PlacedGrid, XrayError> {
         self.geometry.validate()?;
         if cols.is_empty() || self.rows == 0 {
             return Err(XrayError::Geometry("an empty radiograph cannot be placed".into()));
         }
-        let strips = self.rows.min(max_strips.max(1));
-        let mut g = PlacedGrid::default();
-        for k in 0..=strips {
-            let row = f64::from(self.rows) * f64::from(k) / f64::from(strips);
-            let v = 1.0 - (f64::from(k) / f64::from(strips)) as f32;
-            for (c, u) in [(cols.start, 0.0f32), (cols.end, 1.0)] {
-                g.positions.push(self.point(f64::from(c), row, pose_at)?);
-                g.uv.push([u, v]);
+        let nc = cols.len().min(max_col_strips.max(1) as usize) as u32;
+        let nr = self.rows.min(max_row_strips.max(1));
+        let mut g = PlacedGrid { columns: nc + 1, rows: nr + 1, ..PlacedGrid::default() };
+        for k in 0..=nr {
+            let row = f64::from(self.rows) * f64::from(k) / f64::from(nr);
+            let pose = {
+                let stamp_ns = self.row_stamp(row);
+                pose_at(stamp_ns).map_err(|reason| XrayError::Pose { row, stamp_ns, reason })?
+            };
+            let v = 1.0 - (f64::from(k) / f64::from(nr)) as f32;
+            for j in 0..=nc {
+                let f = f64::from(j) / f64::from(nc);
+                let col = f64::from(cols.start) + f * cols.len() as f64;
+                g.positions.push(self.point_with_pose(col, &pose)?);
+                g.uv.push([f as f32, v]);
             }
-            if k > 0 {
-                let i = 2 * k;
-                let (a, b, c, d) = (i - 2, i - 1, i + 1, i);
-                // Counter-clockwise seen from above when columns run +X and rows +Y... either
-                // way the plane is two-sided.
-                g.triangles.push([a, b, c]);
-                g.triangles.push([a, c, d]);
+        }
+        let w = nc + 1;
+        for k in 0..nr {
+            for j in 0..nc {
+                let (a, b) = (k * w + j, k * w + j + 1);
+                let (c, d) = (a + w, b + w);
+                g.triangles.push([a, b, d]);
+                g.triangles.push([a, d, c]);
             }
         }
         Ok(g)
@@ -394,7 +391,11 @@ impl Placement {
 /// A placed radiograph as a textured grid.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PlacedGrid {
-    /// Vertices in `table`.
+    /// Vertices per grid row.
+    pub columns: u32,
+    /// Grid rows.
+    pub rows: u32,
+    /// Vertices in `table`, row-major.
     pub positions: Vec<Vec3>,
     /// Texture coordinates, (0, 0) at the image's bottom-left.
     pub uv: Vec<[f32; 2]>,
@@ -454,16 +455,18 @@ mod tests {
         };
         let mid = p.point(700.0, 50.0, &pose_at).unwrap();
         assert!((mid.y - 0.05).abs() < 1e-9, "{mid:?}");
-        let g = p.grid(200..1200, 10, &pose_at).unwrap();
-        assert_eq!(g.positions.len(), 22);
-        assert_eq!(g.triangles.len(), 20);
-        assert!((g.positions[0].y - 0.0).abs() < 1e-9 && (g.positions[21].y - 0.1).abs() < 1e-9);
+        let g = p.grid(200..1200, 4, 10, &pose_at).unwrap();
+        assert_eq!((g.columns, g.rows), (5, 11));
+        assert_eq!(g.positions.len(), 55);
+        assert_eq!(g.triangles.len(), 80);
+        assert!((g.positions[0].y - 0.0).abs() < 1e-9 && (g.positions[54].y - 0.1).abs() < 1e-9);
+        assert!((g.positions[2].x - p.point_with_pose(700.0, &pose_at(0).unwrap()).unwrap().x).abs() < 1e-12);
         assert_eq!(g.uv[0], [0.0, 1.0]);
-        assert_eq!(g.uv[21], [1.0, 0.0]);
+        assert_eq!(g.uv[54], [1.0, 0.0]);
         // A pose gap is named with the row.
         let mut late = p;
         late.end_ns = 5_000_000_000;
-        let e = late.grid(0..10, 4, &pose_at).unwrap_err();
+        let e = late.grid(0..10, 2, 4, &pose_at).unwrap_err();
         assert!(e.to_string().contains("no C-arm pose at row"), "{e}");
     }
 

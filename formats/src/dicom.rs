@@ -202,7 +202,9 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
             .and_then(|s| parse_datetime_ns(&s)),
         exposure_ms: opt_f64s(tags::EXPOSURE_TIME).map(|v| v[0]),
         source_detector_m: opt_f64s(tags::DISTANCE_SOURCE_TO_DETECTOR).map(|v| v[0] * 1e-3),
-        pixel_spacing_m: opt_f64s(tags::IMAGER_PIXEL_SPACING).filter(|v| v.len() == 2).map(|v| [v[0] * 1e-3, v[1] * 1e-3]),
+        pixel_spacing_m: opt_f64s(tags::IMAGER_PIXEL_SPACING)
+            .filter(|v| v.len() == 2)
+            .map(|v| [v[0] * 1e-3, v[1] * 1e-3]),
     };
     Ok(XrayFile { image, info, transfer_syntax: ts_uid })
 }
@@ -274,9 +276,7 @@ pub fn format_datetime(ns: i64) -> String {
 /// A UID under the `2.25` root (ISO/IEC 9834-8: a 128-bit number in decimal) derived from `key`.
 fn uid(key: &str) -> String {
     // Two FNV-1a 64-bit hashes with different bases make the 128 bits.
-    let fnv = |basis: u64| {
-        key.bytes().fold(basis, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3))
-    };
+    let fnv = |basis: u64| key.bytes().fold(basis, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
     let v = (u128::from(fnv(0xcbf2_9ce4_8422_2325)) << 64) | u128::from(fnv(0x6c62_272e_07bb_0142));
     format!("2.25.{v}")
 }

@@ -1,5 +1,5 @@
 //! Binary glTF 2.0 (`.glb`) scenes: the surfaces (positions, normals, vertex colours, indices)
-//! and the radiograph as a textured quad, under a root node that turns `table` (Z up) into
+//! and the radiograph as a textured grid, under a root node that turns `table` (Z up) into
 //! glTF's Y up.
 
 use crate::scene::Scene;
@@ -104,15 +104,13 @@ pub fn write(w: &mut impl Write, scene: &Scene<'_>) -> std::io::Result<()> {
         meshes.push(json!({"name": s.name, "primitives": [{"attributes": attrs, "indices": indices, "material": materials.len() - 1}]}));
         nodes.push(json!({"name": s.name, "mesh": meshes.len() - 1}));
     }
-    if let Some(p) = &scene.plane {
-        let pos = b.vec3(&p.corners, true);
-        // glTF's texture origin is the image's top-left; the plane's corners start bottom-left.
-        let uv: Vec<u8> = [[0.0f32, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]]
-            .iter()
-            .flat_map(|c| c.iter().flat_map(|v| v.to_le_bytes()))
-            .collect();
-        let tex = b.accessor(&uv, ARRAY_BUFFER, FLOAT, "VEC2", 4, json!({}));
-        let idx = b.indices(&[[0, 1, 2], [0, 2, 3]]);
+    if let Some(p) = scene.plane.as_ref().filter(|p| !p.triangles.is_empty() && p.uv.len() == p.positions.len()) {
+        let pos = b.vec3(&p.positions, true);
+        // glTF's texture origin is the image's top-left; the plane's is bottom-left.
+        let uv: Vec<u8> =
+            p.uv.iter().flat_map(|c| [c[0], 1.0 - c[1]].into_iter().flat_map(|v| v.to_le_bytes())).collect();
+        let tex = b.accessor(&uv, ARRAY_BUFFER, FLOAT, "VEC2", p.uv.len(), json!({}));
+        let idx = b.indices(&p.triangles);
         let view = b.view(&p.png, None);
         images.push(json!({"bufferView": view, "mimeType": "image/png", "name": p.file_name}));
         samplers.push(json!({"magFilter": 9729, "minFilter": 9729, "wrapS": 33071, "wrapT": 33071}));
@@ -199,7 +197,7 @@ mod tests {
         m.compute_normals();
         let scene = Scene {
             surfaces: vec![Surface { name: "merged", mesh: &m, transparency: 0.4 }],
-            plane: Some(TexturedPlane { corners: [[0.0; 3]; 4], png: vec![1, 2, 3], file_name: "xray.png".into() }),
+            plane: Some(TexturedPlane::quad([[0.0; 3]; 4], vec![1, 2, 3], "xray.png")),
         };
         let mut out = Vec::new();
         write(&mut out, &scene).unwrap();

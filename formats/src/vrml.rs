@@ -63,12 +63,20 @@ pub fn write(w: &mut impl Write, scene: &Scene<'_>) -> std::io::Result<()> {
         )?;
         writeln!(w, "      geometry IndexedFaceSet {{\n        solid FALSE")?;
         write!(w, "        coord Coordinate {{ point [")?;
-        for c in &p.corners {
+        for c in &p.positions {
             write!(w, " {} {} {},", c[0], c[1], c[2])?;
         }
         writeln!(w, " ] }}")?;
-        writeln!(w, "        texCoord TextureCoordinate {{ point [ 0 0, 1 0, 1 1, 0 1 ] }}")?;
-        writeln!(w, "        coordIndex [ 0 1 2 3 -1 ]\n        texCoordIndex [ 0 1 2 3 -1 ]\n      }}\n    }}")?;
+        write!(w, "        texCoord TextureCoordinate {{ point [")?;
+        for t in &p.uv {
+            write!(w, " {} {},", t[0], t[1])?;
+        }
+        writeln!(w, " ] }}")?;
+        write!(w, "        coordIndex [")?;
+        for t in &p.triangles {
+            write!(w, " {} {} {} -1,", t[0], t[1], t[2])?;
+        }
+        writeln!(w, " ]\n      }}\n    }}")?;
     }
     writeln!(w, "  ]\n}}")
 }
@@ -107,7 +115,7 @@ mod tests {
         };
         let scene = Scene {
             surfaces: vec![Surface { name: "cam1", mesh: &m, transparency: 0.3 }],
-            plane: Some(TexturedPlane { corners: [[0.0; 3]; 4], png: vec![], file_name: "xray.png".into() }),
+            plane: Some(TexturedPlane::quad([[0.0; 3]; 4], vec![], "xray.png")),
         };
         let mut out = Vec::new();
         write(&mut out, &scene).unwrap();
@@ -118,6 +126,8 @@ mod tests {
         assert!(s.contains("transparency 0.300"));
         assert!(s.contains("0 1 2 -1,"));
         assert!(s.contains("url \"xray.png\""));
+        assert!(s.contains("texCoord TextureCoordinate { point [ 0 0, 1 0, 1 1, 0 1, ] }"));
+        assert!(s.contains("coordIndex [ 0 1 2 -1, 0 2 3 -1, ]"));
         assert_eq!(s.matches('{').count(), s.matches('}').count());
         assert_eq!(s.matches('[').count(), s.matches(']').count());
     }

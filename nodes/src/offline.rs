@@ -30,6 +30,8 @@ pub struct Options {
     pub out: PathBuf,
     /// Progress on stderr.
     pub progress: bool,
+    /// A DICOM radiograph of the scan, placed under the surface.
+    pub xray: Option<PathBuf>,
 }
 
 /// Per-node figures in the report.
@@ -90,6 +92,8 @@ pub struct Report {
     pub nodes: Vec<NodeReport>,
     /// Files written, relative to the output directory.
     pub files: Vec<String>,
+    /// The radiograph: placed, or why not (`None` without `--xray`).
+    pub xray: Option<String>,
 }
 
 /// Peak resident set size of this process (Linux), bytes.
@@ -171,6 +175,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     let ros = RosArgs::parse(&args)?;
     let out_dir = opts.out.to_string_lossy().into_owned();
     let mut router = Router::new();
+    let mut xray_error = None;
     let build = |node: &str,
                  ns: &str,
                  extra: &[(&str, ParamValue)]|
@@ -195,6 +200,26 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             &ns,
             &ros.remaps,
         );
+    }
+    if let Some(x) = &opts.xray {
+        if !x.is_file() {
+            bail!("--xray {}: no such file", x.display());
+        }
+        // Read once up front so a bad file is named before the work starts; the surface is
+        // still reconstructed when it cannot be placed.
+        if let Err(e) = xsurf_formats::dicom::read_file(x) {
+            log::error!("{e}; the surface is reconstructed without the radiograph");
+            xray_error = Some(e.to_string());
+        } else {
+            let file = ParamValue::String(x.to_string_lossy().into_owned());
+            let dir = ParamValue::String(out_dir.clone());
+            router.add(
+                build("xray_aligner", "/", &[("dicom_file", file), ("output_dir", dir)])?,
+                "xray_aligner",
+                "/",
+                &ros.remaps,
+            );
+        }
     }
     let cams_param = ParamValue::StringArray(cameras.clone());
     router.add(
@@ -224,6 +249,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
         unused_topics: meta.topics.iter().filter(|t| !router.has_subscriber(&t.name)).map(|t| t.name.clone()).collect(),
         nodes: Vec::new(),
         files: Vec::new(),
+        xray: None,
     };
     let total_images: u64 = cameras
         .iter()
@@ -306,6 +332,13 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
                 report.merged_points = get("points");
                 report.merged_triangles = get("triangles");
             }
+            "xray_aligner" => {
+                report.xray = Some(if get("placed") > 0 {
+                    "placed".to_string()
+                } else {
+                    format!("not placed: {}", n.last_error.clone().unwrap_or_else(|| "see the log".into()))
+                });
+            }
             _ => {}
         }
         *stage.entry(n.name.clone()).or_default() += n.busy_ns as f64 * 1e-9;
@@ -317,6 +350,9 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             counters,
             last_error: n.last_error.clone(),
         });
+    }
+    if let Some(e) = xray_error {
+        report.xray = Some(format!("not placed: {e}"));
     }
     stage.insert("decode".into(), read_s);
     let total = t_start.elapsed().as_secs_f64();
@@ -370,6 +406,9 @@ impl Report {
                     .unwrap_or_else(|| "no laser line was found in any frame".into());
                 v.push(format!("camera {c}: no points: {why}"));
             }
+        }
+        if let Some(x) = self.xray.as_ref().filter(|x| x.starts_with("not placed")) {
+            v.push(format!("radiograph {x}"));
         }
         for (topic, n) in &self.undecodable {
             v.push(format!("{n} message(s) on {topic} could not be decoded"));

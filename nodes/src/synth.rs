@@ -1,7 +1,8 @@
 //! Writes a synthetic scan as a rosbag2 bag, as the live graph would record it: both cameras'
 //! `image_raw` and `camera_info`, `/tf` (`table -> carm` at 100 Hz), `/tf_static`
-//! (`carm -> <cam>_optical_frame`), `/joint_states` and `/scan/events`; plus the ground truth
-//! beside it (`truth.json`, `truth_<cam>.ply`, the rig and a params file).
+//! (`carm -> <cam>_optical_frame`), `/joint_states` and `/scan/events`; plus the radiograph
+//! taken during the scan (`xray.dcm`) and the ground truth beside it (`truth.json`,
+//! `truth_<cam>.ply`, the rig and a params file).
 
 use crate::convert;
 use anyhow::Context;
@@ -146,6 +147,7 @@ pub fn write_bag(
         }
     }
     let meta = w.finish()?;
+    write_xray(&dir.join(XRAY_FILE), scanner, start, end)?;
     let truth = write_truth(dir, scanner)?;
     Ok(SynthSummary {
         scene: scanner.scene.name.clone(),
@@ -154,6 +156,40 @@ pub fn write_bag(
         messages: meta.message_count,
         truth_points: truth,
     })
+}
+
+/// Name of the synthetic radiograph beside the bag.
+pub const XRAY_FILE: &str = "xray.dcm";
+
+/// The synthetic radiograph of the scan (exposure from `start_ns` to `end_ns`, the scan's
+/// START and END), written as a DICOM Digital X-Ray file.
+pub fn write_xray(path: &Path, scanner: &Scanner, start_ns: i64, end_ns: i64) -> anyhow::Result<()> {
+    use xsurf_core::xray::{DetectorGeometry, FanBeam, Placement};
+    let settings = xsurf_core::synth::xray::XraySettings { seed: scanner.settings.seed, ..Default::default() };
+    let plane = xsurf_core::geom::Plane::from_params(scanner.rig.laser_plane).context("rig laser_plane")?;
+    let source = xsurf_core::geom::Vec3::from_array(scanner.rig.laser_source);
+    let geometry = DetectorGeometry::default();
+    let rows = (((end_ns - start_ns) as f64 * 1e-9) * settings.line_rate_hz).round().max(1.0) as u32;
+    let placement = Placement {
+        fan: FanBeam::new(&plane, source)?,
+        geometry,
+        detector_columns: settings.detector_columns,
+        rows,
+        start_ns,
+        end_ns,
+    };
+    let image = xsurf_core::synth::xray::render_radiograph(&scanner.scene, &placement, &settings, &|t| {
+        scanner.pose_at(scanner.seconds_of(t))
+    });
+    let info = xsurf_formats::dicom::XrayInfo {
+        acquisition_start_ns: Some(start_ns),
+        exposure_ms: Some((end_ns - start_ns) as f64 * 1e-6),
+        source_detector_m: Some(geometry.source_detector_m),
+        pixel_spacing_m: Some([geometry.pitch_m, geometry.pitch_m]),
+    };
+    let key = format!("xsurf-synth/{}/{}/{start_ns}", scanner.scene.name, scanner.settings.seed);
+    xsurf_formats::dicom::write_file(path, &image, &info, &key)?;
+    Ok(())
 }
 
 /// The ground truth beside a synthetic bag: `truth.json` (scene, scan settings, counts),

@@ -21,7 +21,11 @@ pub struct TfBuffer {
 impl TfBuffer {
     /// An empty buffer.
     pub fn new(table_frame: &str, carm_frame: &str, max_gap_ns: i64) -> Self {
-        let mut track = PoseTrack::default();
+        Self::with_capacity(table_frame, carm_frame, max_gap_ns, PoseTrack::default().capacity())
+    }
+    /// An empty buffer keeping at most `capacity` poses.
+    pub fn with_capacity(table_frame: &str, carm_frame: &str, max_gap_ns: i64, capacity: usize) -> Self {
+        let mut track = PoseTrack::new(capacity);
         track.max_gap_ns = max_gap_ns;
         Self { table_frame: table_frame.into(), carm_frame: carm_frame.into(), statics: HashMap::new(), track }
     }

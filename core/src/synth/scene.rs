@@ -143,14 +143,8 @@ fn table(y_min: f64, y_max: f64) -> Object {
 impl Scene {
     /// A scene by name, or `None` (see [`SCENE_NAMES`]).
     pub fn by_name(name: &str) -> Option<Scene> {
-        let obj = |shape, albedo, color| Object {
-            shape,
-            albedo,
-            color,
-            band: None,
-            mu_per_m: MU_TISSUE,
-            internal: false,
-        };
+        let obj =
+            |shape, albedo, color| Object { shape, albedo, color, band: None, mu_per_m: MU_TISSUE, internal: false };
         let bone = |shape| Object {
             shape,
             albedo: 0.0,
@@ -224,7 +218,10 @@ impl Scene {
                         e([-0.08, 1.15, 0.065], [0.07, 0.40, 0.065]),
                         e([0.08, 1.15, 0.065], [0.07, 0.40, 0.065]),
                         // Bones, for the radiograph: skull, spine, humeri, femurs.
-                        bone(Shape::Ellipsoid { center: Vec3::new(0.0, 0.10, 0.09), radii: Vec3::new(0.065, 0.09, 0.08) }),
+                        bone(Shape::Ellipsoid {
+                            center: Vec3::new(0.0, 0.10, 0.09),
+                            radii: Vec3::new(0.065, 0.09, 0.08),
+                        }),
                         bone(Shape::CylinderY { x: 0.0, z: 0.06, radius: 0.015, y_min: 0.20, y_max: 0.78 }),
                         bone(Shape::CylinderY { x: -0.21, z: 0.045, radius: 0.012, y_min: 0.30, y_max: 0.80 }),
                         bone(Shape::CylinderY { x: 0.21, z: 0.045, radius: 0.012, y_min: 0.30, y_max: 0.80 }),

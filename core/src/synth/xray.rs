@@ -69,14 +69,9 @@ pub fn render_radiograph(
             let off = sign * (f64::from(c) + 0.5 - center) * g.pitch_m;
             let det_carm = f.source + f.down * g.source_detector_m + f.across * off;
             let exposed = (off / g.source_detector_m).atan().abs() <= half_angle;
-            let dose = if exposed {
-                (-scene.attenuation(s, pose.transform_point(det_carm))).exp()
-            } else {
-                0.0
-            };
-            let v = settings.dark
-                + settings.open_beam * dose
-                + settings.noise_sigma * dose.sqrt().max(0.05) * rng.normal();
+            let dose = if exposed { (-scene.attenuation(s, pose.transform_point(det_carm))).exp() } else { 0.0 };
+            let v =
+                settings.dark + settings.open_beam * dose + settings.noise_sigma * dose.sqrt().max(0.05) * rng.normal();
             pixels.push(v.round().clamp(0.0, full) as u16);
         }
     }

@@ -12,7 +12,7 @@
 //! ```
 //! Only `bag record`, `bag play`, `param` and `compose` open a DDS participant.
 
-use anyhow::{anyhow, bail, Context};
+use anyhow::{anyhow, Context};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use xsurf_core::eval;
@@ -172,14 +172,12 @@ fn cmd_reconstruct(args: &[String]) -> anyhow::Result<()> {
     let a = Args::parse(args, &["--quiet"], &["--params-file", "--xray", "--out", "-o"])?;
     let [bag] = a.positional.as_slice() else { return Err(usage("reconstruct needs one BAG")) };
     let out = a.get("--out").or(a.get("-o")).ok_or_else(|| usage("reconstruct needs --out DIR"))?;
-    if let Some(x) = a.get("--xray") {
-        bail!("--xray {x}: the radiograph overlay is not available yet (issue: the radiograph under the surface)");
-    }
     let opts = offline::Options {
         bag: PathBuf::from(bag),
         params_file: a.get("--params-file").map(PathBuf::from),
         out: PathBuf::from(out),
         progress: !a.has("--quiet"),
+        xray: a.get("--xray").map(PathBuf::from),
     };
     let r = offline::reconstruct(&opts)?;
     print_report(&r, out);
@@ -220,6 +218,9 @@ fn print_report(r: &offline::Report, out: &str) {
         );
     }
     println!("  merged: {} points, {} triangles", r.merged_points, r.merged_triangles);
+    if let Some(x) = &r.xray {
+        println!("  radiograph: {x}");
+    }
     println!("files in {out}: {}", r.files.join(", "));
 }
 
@@ -247,6 +248,7 @@ fn cmd_demo(args: &[String]) -> anyhow::Result<()> {
         params_file: Some(bag.join("params.yaml")),
         out: recon.clone(),
         progress: true,
+        xray: Some(bag.join(synth::XRAY_FILE)),
     })?;
     print_report(&r, &recon.display().to_string());
     println!("3/3 accuracy against the synthetic scanner's ground truth:");
@@ -281,7 +283,7 @@ fn cmd_demo(args: &[String]) -> anyhow::Result<()> {
     let acc_json = serde_json::json!({"rms_m": acc.rms_m, "p99_m": acc.p99_m, "max_m": acc.max_m, "outlier_fraction_2mm": acc.outlier_fraction_2mm, "coverage": cov, "points": acc.points});
     xsurf_formats::write_bytes_atomic(&out.join("accuracy.json"), serde_json::to_string_pretty(&acc_json)?.as_bytes())?;
     println!(
-        "open {} (VRML) or {} (glTF) to look at the surface",
+        "open {} (VRML) or {} (glTF) to look at the surface over the radiograph",
         recon.join("scene.wrl").display(),
         recon.join("scene.glb").display()
     );

@@ -4,7 +4,10 @@
 //!
 //! The cameras are placed by calibration (their clouds are already in `table`); each grid is
 //! meshed and the surfaces are combined. The merge waits `merge_delay_s` after END so the
-//! meshers' final clouds arrive first.
+//! meshers' final clouds arrive first. The radiograph placed by `xray_aligner`
+//! (`/xray/overlay`, marker id = scan id) goes under the surface in `scene.wrl`, `scene.glb`
+//! and `preview.png`, with `xray.png` beside them; one that arrives after the merge (a
+//! radiograph loaded later) rewrites that scan's scene files.
 
 use super::decl;
 use crate::convert;
@@ -12,7 +15,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 use xsurf_core::mesh::{mesh_grid, Mesh, MeshConfig};
-use xsurf_formats::scene::{Scene, Surface};
+use xsurf_formats::scene::{Scene, Surface, TexturedPlane};
 use xsurf_msgs::pointcloud;
 use xsurf_msgs::sensor_msgs::PointCloud2;
 use xsurf_msgs::visualization_msgs::Marker;
@@ -89,6 +92,10 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     })
 }
 
+/// The last scan merged: its id, the merged mesh and each camera's (kept so that a radiograph
+/// arriving later can be added to its scene files).
+type LastMerge = (u32, Mesh, Vec<(String, Mesh)>);
+
 /// The merger component.
 pub struct MergerNode {
     cfg: Config,
@@ -99,6 +106,10 @@ pub struct MergerNode {
     points: u64,
     triangles: u64,
     bad_clouds: u64,
+    overlays: BTreeMap<u32, TexturedPlane>,
+    last_merge: Option<LastMerge>,
+    merged_current: bool,
+    bad_overlays: u64,
 }
 
 impl MergerNode {
@@ -113,6 +124,10 @@ impl MergerNode {
             points: 0,
             triangles: 0,
             bad_clouds: 0,
+            overlays: BTreeMap::new(),
+            last_merge: None,
+            merged_current: false,
+            bad_overlays: 0,
         })
     }
 
@@ -157,12 +172,7 @@ impl MergerNode {
                 1.0 - self.cfg.transparency,
             ))),
         );
-        if let Some(dir) = &self.cfg.output_dir {
-            let dir = dir.join(format!("scan_{}", self.scan_id));
-            if let Err(e) = write_files(&dir, &merged, &meshes, self.cfg.transparency) {
-                log::error!("merger: cannot write files in {}: {e}", dir.display());
-            }
-        }
+        self.write(self.scan_id, &merged, &meshes);
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
             self.scan_id,
@@ -170,7 +180,59 @@ impl MergerNode {
             merged.triangles.len(),
             meshes.len()
         );
+        self.last_merge = Some((self.scan_id, merged, meshes));
+        self.merged_current = true;
     }
+
+    fn write(&self, scan_id: u32, merged: &Mesh, meshes: &[(String, Mesh)]) {
+        if let Some(dir) = &self.cfg.output_dir {
+            let dir = dir.join(format!("scan_{scan_id}"));
+            let plane = self.overlays.get(&scan_id);
+            if let Err(e) = write_files(&dir, merged, meshes, plane, self.cfg.transparency) {
+                log::error!("merger: cannot write files in {}: {e}", dir.display());
+            }
+        }
+    }
+
+    fn overlay(&mut self, m: &Marker) -> Result<(), NodeError> {
+        let plane = overlay_plane(m).map_err(|e| {
+            self.bad_overlays += 1;
+            NodeError::new(format!("/xray/overlay: {e}"))
+        })?;
+        let scan_id = m.id.max(0) as u32;
+        self.overlays.insert(scan_id, plane);
+        while self.overlays.len() > 4 {
+            self.overlays.pop_first();
+        }
+        if let Some((id, merged, meshes)) = &self.last_merge {
+            if *id == scan_id {
+                log::info!("merger: scan {scan_id}: radiograph arrived after the merge; scene files rewritten");
+                self.write(scan_id, merged, meshes);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The radiograph plane from an `/xray/overlay` marker: its triangles, its uv (rviz2's v = 0 at
+/// the top, turned to VRML's) and its embedded PNG texture.
+fn overlay_plane(m: &Marker) -> Result<TexturedPlane, String> {
+    if m.type_ != Marker::TRIANGLE_LIST || m.points.is_empty() || !m.points.len().is_multiple_of(3) {
+        return Err(format!("type {} with {} points: expected a TRIANGLE_LIST", m.type_, m.points.len()));
+    }
+    if m.uv_coordinates.len() != m.points.len() {
+        return Err(format!("{} uv coordinates for {} points", m.uv_coordinates.len(), m.points.len()));
+    }
+    if m.texture.format != "png" || m.texture.data.is_empty() {
+        return Err(format!("texture format {:?}: expected an embedded png", m.texture.format));
+    }
+    Ok(TexturedPlane {
+        positions: m.points.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect(),
+        uv: m.uv_coordinates.iter().map(|c| [c.u, 1.0 - c.v]).collect(),
+        triangles: (0..m.points.len() as u32 / 3).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect(),
+        png: m.texture.data.clone(),
+        file_name: "xray.png".into(),
+    })
 }
 
 /// Size of `preview.png`, pixels.
@@ -180,18 +242,19 @@ fn write_files(
     dir: &std::path::Path,
     merged: &Mesh,
     meshes: &[(String, Mesh)],
+    plane: Option<&TexturedPlane>,
     transparency: f32,
 ) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)?;
     xsurf_formats::ply::write_file(&dir.join("merged.ply"), merged)?;
     let scene = Scene {
         surfaces: meshes.iter().map(|(name, mesh)| Surface { name, mesh, transparency }).collect(),
-        plane: None,
+        plane: plane.cloned(),
     };
     xsurf_formats::vrml::write_file(&dir.join("scene.wrl"), &scene)?;
     xsurf_formats::gltf::write_file(&dir.join("scene.glb"), &scene)?;
     let (w, h) = PREVIEW_SIZE;
-    let rgb = xsurf_formats::preview::render(merged, w, h);
+    let rgb = xsurf_formats::preview::render_scene(merged, plane, w, h);
     xsurf_formats::image::write_png(&dir.join("preview.png"), w, h, xsurf_formats::image::PngKind::Rgb8, &rgb)?;
     Ok(())
 }
@@ -208,6 +271,7 @@ impl Component for MergerNode {
             .map(|c| Port::new(&format!("/{c}/cloud"), PointCloud2::TYPE_NAME, QosClass::Reliable))
             .collect();
         v.push(Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable));
+        v.push(Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::Reliable));
         v
     }
     fn outputs(&self) -> Vec<Port> {
@@ -232,6 +296,7 @@ impl Component for MergerNode {
         match (input, msg) {
             (i, Msg::Cloud(c)) if i < n => {
                 self.clouds.insert(i, c.clone());
+                self.merged_current = false;
                 Ok(())
             }
             (i, Msg::ScanEvent(e)) if i == n => {
@@ -254,6 +319,7 @@ impl Component for MergerNode {
                 }
                 Ok(())
             }
+            (i, Msg::Marker(m)) if i == n + 1 => self.overlay(m),
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
         }
     }
@@ -263,7 +329,9 @@ impl Component for MergerNode {
         }
     }
     fn finish(&mut self, out: &mut Outbox) {
-        self.merge(out);
+        if !self.merged_current {
+            self.merge(out);
+        }
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
         vec![
@@ -271,6 +339,7 @@ impl Component for MergerNode {
             ("points", self.points),
             ("triangles", self.triangles),
             ("bad_clouds", self.bad_clouds),
+            ("bad_overlays", self.bad_overlays),
         ]
     }
 }

@@ -8,6 +8,7 @@ pub mod edge_detector;
 pub mod merger;
 pub mod mesher;
 pub mod triangulator;
+pub mod xray_aligner;
 
 use xsurf_runtime::component::Component;
 use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue, Params};
@@ -35,6 +36,7 @@ pub fn declarations(node: &str) -> Option<Vec<ParamDecl>> {
         "triangulator" => triangulator::declarations(),
         "mesher" => mesher::declarations(),
         "merger" => merger::declarations(),
+        "xray_aligner" => xray_aligner::declarations(),
         _ => return None,
     })
 }
@@ -48,6 +50,7 @@ pub fn build(node: &str, params: &Params) -> Result<Box<dyn Component>, ParamErr
         "triangulator" => Box::new(triangulator::TriangulatorNode::new(params)?),
         "mesher" => Box::new(mesher::MesherNode::new(params)?),
         "merger" => Box::new(merger::MergerNode::new(params)?),
+        "xray_aligner" => Box::new(xray_aligner::XrayAlignerNode::new(params)?),
         other => {
             return Err(ParamError::Invalid { name: "node".into(), reason: format!("no component named {other}") })
         }

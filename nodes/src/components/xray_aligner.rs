@@ -1,0 +1,593 @@
+//! `xray_aligner`: the radiograph, placed under the surface.
+//!
+//! The radiograph comes from a DICOM file (parameter `dicom_file`, loaded at start and again
+//! whenever the parameter is set: `ros2 param set /xray_aligner dicom_file /path/x.dcm` is the
+//! request) and is published as acquired on `/xray/image` (mono16); or, with
+//! `image_source: topic`, it arrives on `/xray/image` from the scanner. It is placed in `table`
+//! once its scan has ended and the C-arm's pose is known over the whole exposure: rows by the
+//! travel between the exposure's start and end (the scan's START and END events, or the
+//! DICOM's Acquisition DateTime and Exposure Time), columns by the fan-beam geometry at the
+//! reference plane. Unexposed detector columns are cropped. The result goes out on
+//! `/xray/overlay` (a TRIANGLE_LIST grid with per-vertex grey and the windowed PNG as an
+//! embedded texture; the merger puts it into the scene files) and, with `output_dir`, as
+//! `<output_dir>/scan_<id>/xray.png` (windowed, cropped) and `xray.json` (the placement: crop,
+//! exposure, geometry and the grid of table points with their texture coordinates).
+
+use super::decl;
+use crate::convert;
+use crate::tf::TfBuffer;
+use std::path::PathBuf;
+use std::sync::Arc;
+use xsurf_core::geom::{Plane, Vec3};
+use xsurf_core::xray::{DetectorGeometry, FanBeam, Placement, Radiograph, Window};
+use xsurf_formats::dicom::{self, XrayInfo};
+use xsurf_formats::image::{encode_png, PngKind};
+use xsurf_msgs::geometry_msgs::{Point, Vector3};
+use xsurf_msgs::sensor_msgs::{CompressedImage, Image};
+use xsurf_msgs::std_msgs::ColorRGBA;
+use xsurf_msgs::tf2_msgs::TFMessage;
+use xsurf_msgs::visualization_msgs::{Marker, UVCoordinate};
+use xsurf_msgs::xsurf_msgs::ScanEvent;
+use xsurf_msgs::RosMessage;
+use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+
+/// The parameters of `xray_aligner`.
+pub fn declarations() -> Vec<ParamDecl> {
+    vec![
+        decl(
+            "image_source",
+            V::String("dicom".into()),
+            "",
+            "dicom: load dicom_file and publish it on /xray/image; topic: take the radiograph from /xray/image",
+        ),
+        decl(
+            "dicom_file",
+            V::String(String::new()),
+            "",
+            "DICOM radiograph to load; setting it while running loads it (the request)",
+        ),
+        decl("topic_monochrome1", V::Bool(true), "", "with image_source topic: values rise with dose (MONOCHROME1)"),
+        decl("laser_plane", V::DoubleArray(vec![0.0, 1.0, 0.0, 0.0]), "m", "fan-beam plane in carm [nx, ny, nz, d]"),
+        decl("laser_source", V::DoubleArray(vec![0.0, 0.0, 1.2]), "m", "X-ray focal spot in carm [x, y, z]"),
+        decl(
+            "source_detector_m",
+            V::Double(0.0),
+            "m",
+            "focal spot to detector line; 0: the DICOM's Distance Source to Detector",
+        ),
+        decl(
+            "detector_pitch_m",
+            V::Double(0.0),
+            "m",
+            "detector element pitch; 0: the DICOM's Imager Pixel Spacing (column spacing)",
+        ),
+        decl(
+            "center_column",
+            V::Double(-1.0),
+            "px",
+            "detector column under the focal spot (pixel edges at integers); -1: the middle",
+        ),
+        decl("flip_columns", V::Bool(false), "", "detector columns run towards -X of carm"),
+        decl("plane_height_m", V::Double(0.0), "m", "height above the tabletop of the plane the radiograph lies on"),
+        decl(
+            "crop_threshold",
+            V::Double(0.1),
+            "",
+            "edge columns with less than this fraction of the typical dose are cropped; 0: no crop",
+        ),
+        decl(
+            "window_center",
+            V::Double(0.0),
+            "",
+            "display window centre (rescaled units), used when window_width >= 1",
+        ),
+        decl(
+            "window_width",
+            V::Double(0.0),
+            "",
+            "display window width; 0: the file's window or VOI LUT, else automatic",
+        ),
+        decl(
+            "exposure_timing",
+            V::String("events".into()),
+            "",
+            "events: the scan's START..END; dicom: Acquisition DateTime + Exposure Time",
+        ),
+        decl("grid_columns", V::Integer(96), "", "overlay grid cells across (vertex colours stand in for the texture)"),
+        decl("grid_rows", V::Integer(128), "", "overlay grid cells along the scan (follows the travel)"),
+        decl("wait_for_pose_s", V::Double(2.0), "s", "after END, how long to wait for a pose past the exposure end"),
+        decl(
+            "output_dir",
+            V::String(String::new()),
+            "",
+            "if set, <output_dir>/scan_<id>/xray.png and xray.json are written",
+        ),
+        decl("frame_id", V::String("table".into()), "", "frame of the overlay"),
+        decl("table_frame", V::String("table".into()), "", "tf frame of the tabletop"),
+        decl("carm_frame", V::String("carm".into()), "", "tf frame of the C-arm"),
+    ]
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct Config {
+    from_topic: bool,
+    dicom_file: String,
+    topic_monochrome1: bool,
+    plane: Plane,
+    source: Vec3,
+    source_detector_m: f64,
+    pitch_m: f64,
+    center_column: Option<f64>,
+    flip_columns: bool,
+    plane_height_m: f64,
+    crop_threshold: f64,
+    window: Option<Window>,
+    dicom_timing: bool,
+    grid: (u32, u32),
+    wait_ns: i64,
+    output_dir: Option<PathBuf>,
+    frame_id: String,
+    table_frame: String,
+    carm_frame: String,
+}
+
+fn config(p: &Params) -> Result<Config, ParamError> {
+    let from_topic = match p.string("image_source")?.as_str() {
+        "dicom" => false,
+        "topic" => true,
+        other => return Err(Params::invalid("image_source", format!("{other}: expected dicom or topic"))),
+    };
+    let plane = p.f64_array("laser_plane")?;
+    let plane = <[f64; 4]>::try_from(plane.as_slice())
+        .ok()
+        .and_then(Plane::from_params)
+        .ok_or_else(|| Params::invalid("laser_plane", format!("{plane:?}: needs 4 finite values, non-zero normal")))?;
+    let src = p.f64_array("laser_source")?;
+    let source = <[f64; 3]>::try_from(src.as_slice())
+        .ok()
+        .map(Vec3::from_array)
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| Params::invalid("laser_source", format!("{src:?}: needs 3 finite values")))?;
+    let non_negative = |name: &str| -> Result<f64, ParamError> {
+        let v = p.f64(name)?;
+        if !(v >= 0.0 && v.is_finite()) {
+            return Err(Params::invalid(name, format!("{v} must be >= 0")));
+        }
+        Ok(v)
+    };
+    let center = p.f64("center_column")?;
+    let crop = p.f64("crop_threshold")?;
+    if !(0.0..1.0).contains(&crop) {
+        return Err(Params::invalid("crop_threshold", format!("{crop} is not in [0, 1)")));
+    }
+    let (wc, ww) = (p.f64("window_center")?, p.f64("window_width")?);
+    if !(ww >= 0.0) {
+        return Err(Params::invalid("window_width", format!("{ww} must be >= 0")));
+    }
+    let dicom_timing = match p.string("exposure_timing")?.as_str() {
+        "events" => false,
+        "dicom" => true,
+        other => return Err(Params::invalid("exposure_timing", format!("{other}: expected events or dicom"))),
+    };
+    let cells = |name: &str| -> Result<u32, ParamError> {
+        let v = p.i64(name)?;
+        u32::try_from(v)
+            .ok()
+            .filter(|v| (1..=1024).contains(v))
+            .ok_or_else(|| Params::invalid(name, format!("{v} is not in 1..=1024")))
+    };
+    let wait = non_negative("wait_for_pose_s")?;
+    let dir = p.string("output_dir")?;
+    Ok(Config {
+        from_topic,
+        dicom_file: p.string("dicom_file")?,
+        topic_monochrome1: p.bool("topic_monochrome1")?,
+        plane,
+        source,
+        source_detector_m: non_negative("source_detector_m")?,
+        pitch_m: non_negative("detector_pitch_m")?,
+        center_column: (center >= 0.0).then_some(center),
+        flip_columns: p.bool("flip_columns")?,
+        plane_height_m: p.f64("plane_height_m")?,
+        crop_threshold: crop,
+        window: (ww >= 1.0).then_some(Window { center: wc, width: ww }),
+        dicom_timing,
+        grid: (cells("grid_columns")?, cells("grid_rows")?),
+        wait_ns: (wait * 1e9) as i64,
+        output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
+        frame_id: p.string("frame_id")?,
+        table_frame: p.string("table_frame")?,
+        carm_frame: p.string("carm_frame")?,
+    })
+}
+
+/// A complete scan: its id and exposure window.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ScanWindow {
+    id: u32,
+    start_ns: i64,
+    end_ns: Option<i64>,
+}
+
+/// The xray_aligner component.
+pub struct XrayAlignerNode {
+    cfg: Config,
+    tf: TfBuffer,
+    scan: Option<ScanWindow>,
+    /// The radiograph waiting to be placed.
+    pending: Option<(Radiograph, XrayInfo)>,
+    load_requested: bool,
+    end_seen_ns: Option<i64>,
+    loaded: u64,
+    load_errors: u64,
+    placed: u64,
+    place_errors: u64,
+    bad_images: u64,
+}
+
+const IN_TF: usize = 0;
+const IN_EVENTS: usize = 1;
+const IN_IMAGE: usize = 2;
+
+impl XrayAlignerNode {
+    /// Builds the node from its parameters (a `dicom_file` is loaded at the first tick).
+    pub fn new(p: &Params) -> Result<Self, ParamError> {
+        let cfg = config(p)?;
+        // The whole exposure's poses are kept: up to about an hour of /tf at 100 Hz.
+        let tf = TfBuffer::with_capacity(&cfg.table_frame, &cfg.carm_frame, 500_000_000, 400_000);
+        Ok(Self {
+            load_requested: !cfg.from_topic && !cfg.dicom_file.is_empty(),
+            cfg,
+            tf,
+            scan: None,
+            pending: None,
+            end_seen_ns: None,
+            loaded: 0,
+            load_errors: 0,
+            placed: 0,
+            place_errors: 0,
+            bad_images: 0,
+        })
+    }
+
+    /// Index of `/xray/overlay` among the outputs (`/xray/image` comes first when loading DICOM).
+    fn overlay_output(&self) -> usize {
+        usize::from(!self.cfg.from_topic)
+    }
+
+    fn load(&mut self, out: &mut Outbox) {
+        self.load_requested = false;
+        let path = PathBuf::from(&self.cfg.dicom_file);
+        match dicom::read_file(&path) {
+            Ok(f) => {
+                log::info!(
+                    "xray_aligner: {}: {}x{} {}-bit {}",
+                    path.display(),
+                    f.image.width,
+                    f.image.height,
+                    f.image.bits_stored,
+                    if f.image.monochrome1 { "MONOCHROME1" } else { "MONOCHROME2" }
+                );
+                self.loaded += 1;
+                let stamp = f.info.acquisition_start_ns.or(self.scan.map(|s| s.start_ns)).unwrap_or(0);
+                out.publish(0, Msg::Image(Arc::new(mono16_msg(&f.image, stamp, &self.cfg.carm_frame))));
+                self.pending = Some((f.image, f.info));
+            }
+            Err(e) => {
+                self.load_errors += 1;
+                log::error!("xray_aligner: {e}");
+            }
+        }
+    }
+
+    /// The exposure window: from the events or the file.
+    fn exposure(&self, info: &XrayInfo) -> Result<(u32, i64, i64), String> {
+        if self.cfg.dicom_timing {
+            let start = info.acquisition_start_ns.ok_or("the DICOM has no AcquisitionDateTime (0008,002A)")?;
+            let ms = info.exposure_ms.ok_or("the DICOM has no ExposureTime (0018,1150)")?;
+            return Ok((self.scan.map_or(0, |s| s.id), start, start + (ms * 1e6) as i64));
+        }
+        match self.scan {
+            Some(ScanWindow { id, start_ns, end_ns: Some(end) }) => Ok((id, start_ns, end)),
+            Some(_) => Err("the scan has not ended yet".into()),
+            None => Err("no scan START/END on /scan/events (or set exposure_timing: dicom)".into()),
+        }
+    }
+
+    /// Places the pending radiograph if its exposure is complete and posed (or `force`).
+    fn try_place(&mut self, now_ns: i64, force: bool, out: &mut Outbox) {
+        let Some((image, info)) = &self.pending else { return };
+        let (scan_id, start, end) = match self.exposure(info) {
+            Ok(w) => w,
+            Err(e) => {
+                if force {
+                    self.place_errors += 1;
+                    log::error!("xray_aligner: cannot place the radiograph: {e}");
+                    self.pending = None;
+                }
+                return;
+            }
+        };
+        let posed = self.tf.latest_pose_stamp().is_some_and(|l| l >= end);
+        let waited = self.end_seen_ns.is_some_and(|t| now_ns >= t + self.cfg.wait_ns);
+        if !(posed || waited || force) {
+            return;
+        }
+        let result = self.place(image, info, scan_id, start, end);
+        self.pending = None;
+        match result {
+            Ok((marker, png, json)) => {
+                self.placed += 1;
+                log::info!(
+                    "xray_aligner: scan {scan_id}: radiograph placed, {} triangles on z = {} m",
+                    marker.points.len() / 3,
+                    self.cfg.plane_height_m
+                );
+                if let Some(dir) = &self.cfg.output_dir {
+                    let dir = dir.join(format!("scan_{scan_id}"));
+                    let r = std::fs::create_dir_all(&dir).map_err(|e| e.to_string()).and_then(|_| {
+                        xsurf_formats::write_bytes_atomic(&dir.join("xray.png"), &png).map_err(|e| e.to_string())?;
+                        xsurf_formats::write_bytes_atomic(&dir.join("xray.json"), json.as_bytes())
+                            .map_err(|e| e.to_string())
+                    });
+                    if let Err(e) = r {
+                        log::error!("xray_aligner: cannot write xray.png and xray.json in {}: {e}", dir.display());
+                    }
+                }
+                out.publish(self.overlay_output(), Msg::Marker(Arc::new(marker)));
+            }
+            Err(e) => {
+                self.place_errors += 1;
+                log::error!("xray_aligner: cannot place the radiograph of scan {scan_id}: {e}");
+            }
+        }
+    }
+
+    fn place(
+        &self,
+        image: &Radiograph,
+        info: &XrayInfo,
+        scan_id: u32,
+        start_ns: i64,
+        end_ns: i64,
+    ) -> Result<(Marker, Vec<u8>, String), String> {
+        let c = &self.cfg;
+        let pick = |param: f64, file: Option<f64>, what: &str| -> Result<f64, String> {
+            if param > 0.0 {
+                return Ok(param);
+            }
+            file.filter(|v| *v > 0.0).ok_or_else(|| format!("{what} is 0 and the radiograph does not give it"))
+        };
+        let geometry = DetectorGeometry {
+            source_detector_m: pick(
+                c.source_detector_m,
+                info.source_detector_m,
+                "source_detector_m (DICOM DistanceSourceToDetector (0018,1110))",
+            )?,
+            pitch_m: pick(
+                c.pitch_m,
+                info.pixel_spacing_m.map(|p| p[1]),
+                "detector_pitch_m (DICOM ImagerPixelSpacing (0018,1164))",
+            )?,
+            center_column: c.center_column,
+            flip_columns: c.flip_columns,
+            plane_height_m: c.plane_height_m,
+        };
+        let cols = if c.crop_threshold > 0.0 {
+            image.exposed_columns(c.crop_threshold).map_err(|e| e.to_string())?
+        } else {
+            0..image.width
+        };
+        let placement = Placement {
+            fan: FanBeam::new(&c.plane, c.source).map_err(|e| e.to_string())?,
+            geometry,
+            detector_columns: image.width,
+            rows: image.height,
+            start_ns,
+            end_ns,
+        };
+        let pose_at = |t: i64| self.tf.table_from_carm(t).map_err(|e| e.to_string());
+        let grid = placement.grid(cols.clone(), c.grid.0, c.grid.1, &pose_at).map_err(|e| e.to_string())?;
+        let cropped = image.crop_columns(cols.clone());
+        let grey = cropped.display(c.window);
+        let png = encode_png(cropped.width, cropped.height, PngKind::Grey8, &grey).map_err(|e| e.to_string())?;
+        let (w, h) = (cropped.width as usize, cropped.height as usize);
+        let sample = |uv: [f32; 2]| -> f32 {
+            let x = ((uv[0] * w as f32) as usize).min(w - 1);
+            let y = (((1.0 - uv[1]) * h as f32) as usize).min(h - 1);
+            f32::from(grey[y * w + x]) / 255.0
+        };
+        let header = convert::header(start_ns, &c.frame_id);
+        let mut m = Marker {
+            header: header.clone(),
+            ns: "xray".into(),
+            id: scan_id as i32,
+            type_: Marker::TRIANGLE_LIST,
+            action: Marker::ADD,
+            scale: Vector3 { x: 1.0, y: 1.0, z: 1.0 },
+            color: ColorRGBA { r: 1.0, g: 1.0, b: 1.0, a: 1.0 },
+            texture_resource: "embedded://xray.png".into(),
+            texture: CompressedImage { header, format: "png".into(), data: png.clone() },
+            ..Default::default()
+        };
+        m.pose.orientation.w = 1.0;
+        for t in &grid.triangles {
+            for &i in t {
+                let (p, uv) = (grid.positions[i as usize], grid.uv[i as usize]);
+                m.points.push(Point { x: p.x, y: p.y, z: p.z });
+                let g = sample(uv);
+                m.colors.push(ColorRGBA { r: g, g, b: g, a: 1.0 });
+                // rviz2 (Ogre) has v = 0 at the image's top.
+                m.uv_coordinates.push(UVCoordinate { u: uv[0], v: 1.0 - uv[1] });
+            }
+        }
+        let json = serde_json::json!({
+            "scan_id": scan_id,
+            "detector_columns": image.width,
+            "columns": [cols.start, cols.end],
+            "rows": image.height,
+            "exposure_ns": [start_ns, end_ns],
+            "source_detector_m": geometry.source_detector_m,
+            "detector_pitch_m": geometry.pitch_m,
+            "plane_height_m": geometry.plane_height_m,
+            "grid": {
+                "columns": grid.columns,
+                "rows": grid.rows,
+                "positions": grid.positions.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>(),
+                "uv": grid.uv,
+            },
+            "about": "xray.png is the cropped radiograph (columns [start, end) of the detector); grid vertex (j, k) lies at texture (u, v) = (j / (columns - 1), 1 - k / (rows - 1)), v = 0 at the image's last row",
+        });
+        Ok((m, png, serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?))
+    }
+}
+
+/// `/xray/image`: the stored values as mono16.
+fn mono16_msg(r: &Radiograph, stamp_ns: i64, frame: &str) -> Image {
+    Image {
+        header: convert::header(stamp_ns, frame),
+        height: r.height,
+        width: r.width,
+        encoding: "mono16".into(),
+        is_bigendian: 0,
+        step: r.width * 2,
+        data: r.pixels.iter().flat_map(|v| v.to_le_bytes()).collect(),
+    }
+}
+
+/// A radiograph from an `/xray/image` message (mono8 or mono16).
+fn from_msg(m: &Image, monochrome1: bool) -> Result<Radiograph, String> {
+    let bpp = match m.encoding.as_str() {
+        "mono16" | "16UC1" => 2usize,
+        "mono8" | "8UC1" => 1,
+        other => return Err(format!("encoding {other}: a radiograph must be mono8 or mono16")),
+    };
+    let (w, h, step) = (m.width as usize, m.height as usize, m.step as usize);
+    if w == 0 || h == 0 || step < w * bpp || m.data.len() < step * (h - 1) + w * bpp {
+        return Err(format!("{}x{} step {} does not fit {} bytes", m.width, m.height, m.step, m.data.len()));
+    }
+    let mut px = Vec::with_capacity(w * h);
+    for row in m.data.chunks(step).take(h) {
+        if bpp == 1 {
+            px.extend(row[..w].iter().map(|&b| u16::from(b)));
+        } else {
+            px.extend(row[..2 * w].chunks_exact(2).map(|b| {
+                if m.is_bigendian != 0 {
+                    u16::from_be_bytes([b[0], b[1]])
+                } else {
+                    u16::from_le_bytes([b[0], b[1]])
+                }
+            }));
+        }
+    }
+    let mut r = Radiograph::new(m.width, m.height, px, if bpp == 1 { 8 } else { 16 }).map_err(|e| e.to_string())?;
+    r.monochrome1 = monochrome1;
+    Ok(r)
+}
+
+impl Component for XrayAlignerNode {
+    fn node_name(&self) -> &'static str {
+        "xray_aligner"
+    }
+    fn inputs(&self) -> Vec<Port> {
+        let mut v = vec![
+            Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable),
+            Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
+        ];
+        if self.cfg.from_topic {
+            v.push(Port::new("/xray/image", Image::TYPE_NAME, QosClass::Reliable));
+        }
+        v
+    }
+    fn outputs(&self) -> Vec<Port> {
+        let mut v = Vec::new();
+        if !self.cfg.from_topic {
+            v.push(Port::new("/xray/image", Image::TYPE_NAME, QosClass::Reliable));
+        }
+        v.push(Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::Reliable));
+        v
+    }
+    fn declarations(&self) -> Vec<ParamDecl> {
+        declarations()
+    }
+    fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
+        let c = config(p)?;
+        if c.from_topic != self.cfg.from_topic {
+            return Err(Params::invalid("image_source", "cannot change while running (restart the node)"));
+        }
+        if !c.from_topic && !c.dicom_file.is_empty() && c.dicom_file != self.cfg.dicom_file {
+            self.load_requested = true;
+        }
+        self.cfg = c;
+        Ok(())
+    }
+    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+        match (input, msg) {
+            (IN_TF, Msg::Tf(t)) => {
+                self.tf.add_dynamic(t);
+                if self.pending.is_some() && self.end_seen_ns.is_some() {
+                    let now = self.tf.latest_pose_stamp().unwrap_or(0);
+                    self.try_place(now, false, out);
+                }
+                Ok(())
+            }
+            (IN_EVENTS, Msg::ScanEvent(e)) => {
+                let stamp = e.header.stamp.nanos();
+                match e.event {
+                    ScanEvent::START => {
+                        self.scan = Some(ScanWindow { id: e.scan_id, start_ns: stamp, end_ns: None });
+                        self.end_seen_ns = None;
+                    }
+                    ScanEvent::END => match &mut self.scan {
+                        Some(s) if s.id == e.scan_id => {
+                            s.end_ns = Some(stamp);
+                            self.end_seen_ns = Some(stamp);
+                        }
+                        _ => log::warn!("xray_aligner: END of scan {} without its START", e.scan_id),
+                    },
+                    _ => {
+                        self.scan = None;
+                        self.end_seen_ns = None;
+                    }
+                }
+                Ok(())
+            }
+            (IN_IMAGE, Msg::Image(m)) if self.cfg.from_topic => match from_msg(m, self.cfg.topic_monochrome1) {
+                Ok(r) => {
+                    self.pending = Some((r, XrayInfo::default()));
+                    self.loaded += 1;
+                    Ok(())
+                }
+                Err(e) => {
+                    self.bad_images += 1;
+                    Err(NodeError::new(format!("/xray/image: {e}")))
+                }
+            },
+            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+        }
+    }
+    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+        if self.load_requested {
+            self.load(out);
+        }
+        if self.pending.is_some() && (self.end_seen_ns.is_some() || self.cfg.dicom_timing) {
+            self.try_place(now_ns, false, out);
+        }
+    }
+    fn finish(&mut self, out: &mut Outbox) {
+        if self.load_requested {
+            self.load(out);
+        }
+        self.try_place(i64::MAX, true, out);
+    }
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![
+            ("loaded", self.loaded),
+            ("load_errors", self.load_errors),
+            ("placed", self.placed),
+            ("place_errors", self.place_errors),
+            ("bad_images", self.bad_images),
+        ]
+    }
+}
