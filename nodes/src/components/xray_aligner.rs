@@ -591,3 +591,105 @@ impl Component for XrayAlignerNode {
         ]
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::components::{build, declarations};
+    use std::cell::RefCell;
+    use std::rc::Rc;
+    use xsurf_core::pose::table_from_carm;
+    use xsurf_core::xray::Radiograph;
+    use xsurf_runtime::router::Router;
+
+    fn params(node: &str, set: &[(&str, V)]) -> Params {
+        let overrides = set.iter().map(|(k, v)| (k.to_string(), v.clone())).collect();
+        Params::resolve(&declarations(node).unwrap(), &overrides).unwrap()
+    }
+
+    #[test]
+    fn a_radiograph_loaded_on_request_after_the_scan_is_placed_and_reaches_the_scene() {
+        let dir = std::env::temp_dir().join(format!("xsurf-aligner-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        // A 40x10 radiograph: 5 unexposed columns at each edge.
+        let px: Vec<u16> =
+            (0..400).map(|i| if (5..35).contains(&(i % 40)) { 9000 + (i % 7) as u16 } else { 20 }).collect();
+        let mut r = Radiograph::new(40, 10, px, 14).unwrap();
+        r.monochrome1 = true;
+        let info = XrayInfo { source_detector_m: Some(1.3), pixel_spacing_m: Some([0.01, 0.01]), ..Default::default() };
+        let dcm = dir.join("x.dcm");
+        dicom::write_file(&dcm, &r, &info, "t").unwrap();
+
+        let mut router = Router::new();
+        let aligner =
+            router.add(build("xray_aligner", &params("xray_aligner", &[])).unwrap(), "xray_aligner", "/", &[]);
+        let out = V::String(dir.to_string_lossy().into_owned());
+        router.add(build("merger", &params("merger", &[("output_dir", out)])).unwrap(), "merger", "/", &[]);
+        let seen: Rc<RefCell<Vec<(String, Msg)>>> = Rc::default();
+        let s = seen.clone();
+        router.set_tap(Box::new(move |t, m| s.borrow_mut().push((t.to_string(), m.clone()))));
+
+        // A scan from t = 1 s to 2 s at 0.1 m/s, poses at 100 Hz; a cloud so the merger merges.
+        let event = |t: i64, e: u8| {
+            Msg::ScanEvent(Arc::new(ScanEvent { header: convert::header(t, "table"), scan_id: 7, event: e }))
+        };
+        router.publish("/scan/events", &event(1_000_000_000, ScanEvent::START));
+        for k in 0..=250 {
+            let t = k * 10_000_000;
+            let pose = table_from_carm((t - 1_000_000_000) as f64 * 1e-10, 0.0, 0.0);
+            let tf = TFMessage { transforms: vec![convert::transform_stamped(t, "table", "carm", &pose)] };
+            router.publish("/tf", &Msg::Tf(Arc::new(tf)));
+        }
+        let mut grid = xsurf_core::mesh::Grid::new(3);
+        for f in 0..3 {
+            let points = (0..3).map(|i| [i as f32 * 0.01, f as f32 * 0.01, 0.0]).collect();
+            let p = xsurf_core::triangulate::Profile {
+                points,
+                intensity: vec![100.0; 3],
+                outside_volume: 0,
+                rgb: None,
+                range: vec![1.0; 3],
+            };
+            grid.push(i64::from(f), &p).unwrap();
+        }
+        router.publish("/cam1/cloud", &Msg::Cloud(Arc::new(convert::grid_cloud(&grid, convert::header(0, "table")))));
+        router.publish("/scan/events", &event(2_000_000_000, ScanEvent::END));
+        router.tick(2_500_000_000);
+        router.tick(3_100_000_000);
+        let scan = dir.join("scan_7");
+        assert!(scan.join("scene.wrl").is_file(), "merged");
+        assert!(!scan.join("xray.png").exists(), "no radiograph yet");
+
+        // The request: the parameter is set after the scan.
+        router
+            .reconfigure(aligner, &params("xray_aligner", &[("dicom_file", V::String(dcm.to_string_lossy().into()))]))
+            .unwrap();
+        router.tick(3_200_000_000);
+        let seen = seen.borrow();
+        let image = seen.iter().find(|(t, _)| t == "/xray/image").expect("published as acquired");
+        let Msg::Image(img) = &image.1 else { panic!() };
+        assert_eq!((img.encoding.as_str(), img.width, img.height, img.step), ("mono16", 40, 10, 80));
+        let overlay = seen.iter().find(|(t, _)| t == "/xray/overlay").expect("placed");
+        let Msg::Marker(m) = &overlay.1 else { panic!() };
+        assert_eq!((m.id, m.type_, m.ns.as_str()), (7, Marker::TRIANGLE_LIST, "xray"));
+        assert_eq!(m.points.len() % 3, 0);
+        assert_eq!((m.colors.len(), m.uv_coordinates.len()), (m.points.len(), m.points.len()));
+        assert_eq!(m.texture.format, "png");
+        // Columns 5..35 cropped, 0.01 m pitch demagnified by 1.2 / 1.3 at the tabletop; rows
+        // from travel 0 (START) to 0.1 m (END).
+        let xs: Vec<f64> = m.points.iter().map(|p| p.x).collect();
+        let ys: Vec<f64> = m.points.iter().map(|p| p.y).collect();
+        let span = |v: &[f64]| {
+            (v.iter().cloned().fold(f64::INFINITY, f64::min), v.iter().cloned().fold(f64::NEG_INFINITY, f64::max))
+        };
+        let (x0, x1) = span(&xs);
+        assert!((x0 + 0.15 * 1.2 / 1.3).abs() < 1e-9 && (x1 - 0.15 * 1.2 / 1.3).abs() < 1e-9, "{x0} {x1}");
+        let (y0, y1) = span(&ys);
+        assert!(y0.abs() < 1e-9 && (y1 - 0.1).abs() < 1e-9, "{y0} {y1}");
+        // The merger rewrote the scan's scene with the radiograph.
+        assert!(scan.join("xray.png").is_file());
+        assert!(std::fs::read_to_string(scan.join("scene.wrl")).unwrap().contains("ImageTexture"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
