@@ -405,6 +405,8 @@ fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturat
         hi += 1;
     }
     let gap = (2 * (m - lo).max(hi - m) + 2).min(max_hw);
+    // A narrower line keeps the first flanks (they are clear of it, only a little further out).
+    let gap = gap.max(gap0);
     let (bg, noise) = if gap == gap0 { (bg0, noise0) } else { background(p, m, gap, cfg.flank_px as usize) };
     let strength = peak - bg;
     if strength < (cfg.min_strength * scale).max(cfg.noise_factor * noise) || strength <= 0.0 {
