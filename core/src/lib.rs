@@ -9,6 +9,7 @@
 //! - [`mesh`]: the organized grid (samples x frames) and its triangulation and smoothing;
 //! - [`synth`]: the synthetic scanner, which renders scans and knows the true surface;
 //! - [`xray`]: the radiograph's grey levels, cropping and placement in `table`;
+//! - [`register`]: the second camera's placement refined against the first camera's surface;
 //! - [`eval`]: accuracy and coverage against that truth.
 //!
 //! ```
@@ -34,6 +35,7 @@ pub mod geom;
 pub mod image;
 pub mod mesh;
 pub mod pose;
+pub mod register;
 pub mod rig;
 pub mod synth;
 pub mod triangulate;

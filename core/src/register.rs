@@ -1,0 +1,377 @@
+//! Camera-to-camera refinement: the second camera's placement (`carm -> optical`) corrected
+//! against the first camera's surface.
+//!
+//! A wrong camera placement does not move the camera's cloud rigidly: each point is where the
+//! camera's ray meets the laser plane, so a small camera error bends the cloud within the plane.
+//! The refinement therefore keeps what was observed (each point's ray in the camera frame and the
+//! C-arm pose of its frame) and re-triangulates through a corrected placement, minimising the
+//! point-to-plane distances to the reference surface (Gauss-Newton on the 6 parameters, nearest
+//! neighbours from a k-d tree, trimmed and Huber-weighted correspondences re-found every
+//! iteration). It refuses, with the reason, when the overlap is too small, when the fit stays
+//! poor, or when the result moves the camera further than a bound: then the calibrated placement
+//! stands.
+
+use crate::geom::{Iso3, Mat3, Plane, Quat, Vec3};
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+
+/// One observed point of the camera being refined.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Observation {
+    /// Unit ray in the camera's optical frame.
+    pub ray: Vec3,
+    /// `table -> carm` of the point's frame.
+    pub table_from_carm: Iso3,
+}
+
+impl Observation {
+    /// The observation behind a point `p` (in `table`) that was triangulated with the placement
+    /// `carm_from_optical` at the pose `table_from_carm`: its ray from the optical centre.
+    pub fn from_point(p: Vec3, table_from_carm: &Iso3, carm_from_optical: &Iso3) -> Option<Self> {
+        let q = carm_from_optical.inverse().transform_point(table_from_carm.inverse().transform_point(p));
+        Some(Self { ray: q.try_normalize()?, table_from_carm: *table_from_carm })
+    }
+
+    /// The point in `table` through the placement `carm_from_optical` and the laser plane (in
+    /// `carm`); `None` for a ray parallel to the plane or meeting it behind the camera.
+    pub fn triangulate(&self, carm_from_optical: &Iso3, plane: &Plane) -> Option<Vec3> {
+        let o = carm_from_optical.translation;
+        let d = carm_from_optical.transform_vector(self.ray);
+        let den = plane.normal.dot(d);
+        if den.abs() < 1e-12 {
+            return None;
+        }
+        let t = (plane.d - plane.normal.dot(o)) / den;
+        (t > 0.0).then(|| self.table_from_carm.transform_point(o + d * t))
+    }
+}
+
+/// Settings of the refinement.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefineConfig {
+    /// Gauss-Newton iterations at most.
+    pub max_iterations: u32,
+    /// Correspondences farther than this are not used, metres.
+    pub max_distance_m: f64,
+    /// Fraction of the correspondences kept (the closest), 0..1.
+    pub trim_fraction: f64,
+    /// Huber threshold on the point-to-plane residual, metres.
+    pub huber_m: f64,
+    /// Observations used at most (evenly subsampled).
+    pub max_points: usize,
+    /// Smallest number of overlapping points.
+    pub min_overlap_points: usize,
+    /// Smallest fraction of the observations that overlap the reference.
+    pub min_overlap_fraction: f64,
+    /// Largest correction of the camera's position, metres.
+    pub max_translation_m: f64,
+    /// Largest correction of the camera's orientation, degrees.
+    pub max_rotation_deg: f64,
+    /// Largest RMS point-to-plane residual accepted after the fit, metres.
+    pub max_rms_m: f64,
+}
+
+impl Default for RefineConfig {
+    fn default() -> Self {
+        Self {
+            max_iterations: 40,
+            max_distance_m: 0.01,
+            trim_fraction: 0.9,
+            huber_m: 0.001,
+            max_points: 20_000,
+            min_overlap_points: 200,
+            min_overlap_fraction: 0.05,
+            max_translation_m: 0.02,
+            max_rotation_deg: 2.0,
+            max_rms_m: 0.001,
+        }
+    }
+}
+
+/// What the refinement did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefineReport {
+    /// The refined placement `carm -> optical`.
+    pub carm_from_optical: Iso3,
+    /// Correction of the camera's position (refined minus calibrated, in `carm`), metres.
+    pub translation_m: Vec3,
+    /// Angle of the orientation correction, degrees.
+    pub rotation_deg: f64,
+    /// Iterations run.
+    pub iterations: u32,
+    /// RMS point-to-plane residual of the correspondences before, metres.
+    pub rms_before_m: f64,
+    /// The same after.
+    pub rms_after_m: f64,
+    /// Fraction of the observations with a reference point within `max_distance_m`, after.
+    pub overlap_fraction: f64,
+    /// Observations used.
+    pub points: usize,
+}
+
+/// Why the calibrated placement stands.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RefineError {
+    /// Too few points of the camera lie near the reference surface.
+    #[error("too little overlap: {points} of {total} points within {max_distance_m} m of the reference (need {min_points} and {min_fraction})")]
+    TooLittleOverlap {
+        /// Overlapping points.
+        points: usize,
+        /// Points tried.
+        total: usize,
+        /// The distance used.
+        max_distance_m: f64,
+        /// The minimum count.
+        min_points: usize,
+        /// The minimum fraction.
+        min_fraction: f64,
+    },
+    /// The correction is beyond the bounds.
+    #[error("the refined placement moves the camera {translation_m:.4} m and {rotation_deg:.3} deg, beyond the bounds {max_translation_m} m / {max_rotation_deg} deg")]
+    MovedTooFar {
+        /// Translation found.
+        translation_m: f64,
+        /// Rotation found.
+        rotation_deg: f64,
+        /// Bound.
+        max_translation_m: f64,
+        /// Bound.
+        max_rotation_deg: f64,
+    },
+    /// The fit stays poor.
+    #[error("no good fit: RMS residual {rms_m:.5} m after {iterations} iterations (limit {max_rms_m} m)")]
+    PoorFit {
+        /// RMS after.
+        rms_m: f64,
+        /// Iterations run.
+        iterations: u32,
+        /// Limit.
+        max_rms_m: f64,
+    },
+    /// The geometry does not constrain the placement (a flat or featureless overlap).
+    #[error("the overlap does not constrain the camera's placement (singular normal equations)")]
+    Degenerate,
+    /// The reference surface is empty or its normals do not match its points.
+    #[error("the reference surface has {points} points and {normals} normals")]
+    BadReference {
+        /// Points.
+        points: usize,
+        /// Normals.
+        normals: usize,
+    },
+}
+
+/// The reference surface: points with unit normals, indexed for nearest-neighbour queries.
+pub struct Reference {
+    points: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    tree: ImmutableKdTree<f64, 3>,
+}
+
+impl Reference {
+    /// Indexes `points` (in `table`) with their `normals`; non-finite entries are left out.
+    pub fn new(points: &[Vec3], normals: &[Vec3]) -> Result<Self, RefineError> {
+        if points.len() != normals.len() || points.is_empty() {
+            return Err(RefineError::BadReference { points: points.len(), normals: normals.len() });
+        }
+        let (p, n): (Vec<Vec3>, Vec<Vec3>) = points
+            .iter()
+            .zip(normals)
+            .filter(|(p, n)| p.is_finite() && n.is_finite() && n.norm() > 0.5)
+            .map(|(p, n)| (*p, *n))
+            .unzip();
+        if p.is_empty() {
+            return Err(RefineError::BadReference { points: 0, normals: 0 });
+        }
+        let entries: Vec<[f64; 3]> = p.iter().map(|v| v.to_array()).collect();
+        let tree = ImmutableKdTree::new_from_slice(&entries)
+            .map_err(|_| RefineError::BadReference { points: p.len(), normals: n.len() })?;
+        Ok(Self { points: p, normals: n, tree })
+    }
+
+    /// The nearest reference point to `q` within `max_d`: its index.
+    fn nearest(&self, q: Vec3, max_d: f64) -> Option<usize> {
+        let r = self.tree.query(&q.to_array()).nearest_one::<SquaredEuclidean<f64>>().execute();
+        (r.distance <= max_d * max_d).then_some(r.item as usize)
+    }
+}
+
+/// A placement corrected by `x = (rotation vector, translation)` applied in `carm` about the
+/// camera's centre.
+fn corrected(base: &Iso3, x: &[f64; 6]) -> Iso3 {
+    let w = Vec3::new(x[0], x[1], x[2]);
+    let angle = w.norm();
+    let r = if angle > 0.0 { Quat::from_axis_angle(w / angle, angle).to_mat3() } else { Mat3::IDENTITY };
+    Iso3 { rotation: r.mul_mat(&base.rotation), translation: base.translation + Vec3::new(x[3], x[4], x[5]) }
+}
+
+/// Angle between two rotations, degrees.
+fn rotation_angle_deg(a: &Mat3, b: &Mat3) -> f64 {
+    let m = a.transpose().mul_mat(b);
+    let tr = m.column(0).x + m.column(1).y + m.column(2).z;
+    ((tr - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+/// Solves the symmetric 6x6 system `a x = b` by Gaussian elimination with partial pivoting.
+fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
+    let scale = (0..6).map(|i| a[i][i].abs()).fold(0.0, f64::max).max(1e-300);
+    for c in 0..6 {
+        let p = (c..6).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+        if a[p][c].abs() < 1e-12 * scale {
+            return None;
+        }
+        a.swap(c, p);
+        b.swap(c, p);
+        for r in c + 1..6 {
+            let f = a[r][c] / a[c][c];
+            for k in c..6 {
+                a[r][k] -= f * a[c][k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    let mut x = [0.0; 6];
+    for c in (0..6).rev() {
+        let s: f64 = (c + 1..6).map(|k| a[c][k] * x[k]).sum();
+        x[c] = (b[c] - s) / a[c][c];
+    }
+    Some(x)
+}
+
+/// Refines `carm_from_optical` of the camera whose `observations` are given against the
+/// `reference` surface, with the laser `plane` in `carm`.
+pub fn refine_camera(
+    reference: &Reference,
+    observations: &[Observation],
+    carm_from_optical: &Iso3,
+    plane: &Plane,
+    cfg: &RefineConfig,
+) -> Result<RefineReport, RefineError> {
+    let step = observations.len().div_ceil(cfg.max_points.max(1)).max(1);
+    let obs: Vec<&Observation> = observations.iter().step_by(step).collect();
+    // Residuals of the current placement: (observation index, reference index, residual).
+    let matches = |e: &Iso3| -> Vec<(usize, usize, f64)> {
+        obs.iter()
+            .enumerate()
+            .filter_map(|(i, o)| {
+                let p = o.triangulate(e, plane)?;
+                let j = reference.nearest(p, cfg.max_distance_m)?;
+                Some((i, j, reference.normals[j].dot(p - reference.points[j])))
+            })
+            .collect()
+    };
+    let rms = |m: &[(usize, usize, f64)]| (m.iter().map(|x| x.2 * x.2).sum::<f64>() / m.len().max(1) as f64).sqrt();
+    let first = matches(carm_from_optical);
+    let fraction = first.len() as f64 / obs.len().max(1) as f64;
+    if first.len() < cfg.min_overlap_points || fraction < cfg.min_overlap_fraction {
+        return Err(RefineError::TooLittleOverlap {
+            points: first.len(),
+            total: obs.len(),
+            max_distance_m: cfg.max_distance_m,
+            min_points: cfg.min_overlap_points,
+            min_fraction: cfg.min_overlap_fraction,
+        });
+    }
+    let rms_before = rms(&first);
+    let mut e = *carm_from_optical;
+    let mut iterations = 0;
+    let h = [1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6];
+    for it in 0..cfg.max_iterations {
+        iterations = it + 1;
+        let mut m = matches(&e);
+        if m.len() < cfg.min_overlap_points {
+            break;
+        }
+        // Trim: keep the closest fraction.
+        m.sort_by(|a, b| a.2.abs().total_cmp(&b.2.abs()));
+        m.truncate(((m.len() as f64) * cfg.trim_fraction).ceil() as usize);
+        let (mut ata, mut atb) = ([[0.0; 6]; 6], [0.0; 6]);
+        for &(i, j, r) in &m {
+            let (y, n) = (reference.points[j], reference.normals[j]);
+            let mut jac = [0.0; 6];
+            for k in 0..6 {
+                let mut xp = [0.0; 6];
+                xp[k] = h[k];
+                let mut xm = [0.0; 6];
+                xm[k] = -h[k];
+                let (Some(pp), Some(pm)) =
+                    (obs[i].triangulate(&corrected(&e, &xp), plane), obs[i].triangulate(&corrected(&e, &xm), plane))
+                else {
+                    continue;
+                };
+                jac[k] = (n.dot(pp - y) - n.dot(pm - y)) / (2.0 * h[k]);
+            }
+            let w = if r.abs() <= cfg.huber_m { 1.0 } else { cfg.huber_m / r.abs() };
+            for a in 0..6 {
+                for b in 0..6 {
+                    ata[a][b] += w * jac[a] * jac[b];
+                }
+                atb[a] -= w * jac[a] * r;
+            }
+        }
+        let x = solve6(ata, atb).ok_or(RefineError::Degenerate)?;
+        e = corrected(&e, &x);
+        let rot = Vec3::new(x[0], x[1], x[2]).norm();
+        let tr = Vec3::new(x[3], x[4], x[5]).norm();
+        if rot < 1e-9 && tr < 1e-9 {
+            break;
+        }
+    }
+    let last = matches(&e);
+    let mut sorted = last.clone();
+    sorted.sort_by(|a, b| a.2.abs().total_cmp(&b.2.abs()));
+    sorted.truncate(((sorted.len() as f64) * cfg.trim_fraction).ceil() as usize);
+    let rms_after = rms(&sorted);
+    let translation_m = e.translation - carm_from_optical.translation;
+    let rotation_deg = rotation_angle_deg(&carm_from_optical.rotation, &e.rotation);
+    if translation_m.norm() > cfg.max_translation_m || rotation_deg > cfg.max_rotation_deg {
+        return Err(RefineError::MovedTooFar {
+            translation_m: translation_m.norm(),
+            rotation_deg,
+            max_translation_m: cfg.max_translation_m,
+            max_rotation_deg: cfg.max_rotation_deg,
+        });
+    }
+    if !(rms_after <= cfg.max_rms_m) || last.len() < cfg.min_overlap_points {
+        return Err(RefineError::PoorFit { rms_m: rms_after, iterations, max_rms_m: cfg.max_rms_m });
+    }
+    Ok(RefineReport {
+        carm_from_optical: e,
+        translation_m,
+        rotation_deg,
+        iterations,
+        rms_before_m: rms_before,
+        rms_after_m: rms_after,
+        overlap_fraction: last.len() as f64 / obs.len().max(1) as f64,
+        points: obs.len(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn observation_round_trip_and_six_by_six_solve() {
+        let e = Iso3::look_at(Vec3::new(0.25, 0.4, 0.8), Vec3::new(0.0, 0.0, 0.05), -Vec3::X).unwrap();
+        let plane = Plane::from_params([0.0, 1.0, 0.0, 0.0]).unwrap();
+        let pose = Iso3 { rotation: Mat3::IDENTITY, translation: Vec3::new(0.0, 0.1, 0.0) };
+        let p = Vec3::new(0.03, 0.1, 0.02);
+        let o = Observation::from_point(p, &pose, &e).unwrap();
+        assert!((o.triangulate(&e, &plane).unwrap() - p).norm() < 1e-12);
+        let a = [
+            [4.0, 1.0, 0.0, 0.0, 0.0, 0.5],
+            [1.0, 3.0, 0.2, 0.0, 0.0, 0.0],
+            [0.0, 0.2, 5.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 2.0, 0.3, 0.0],
+            [0.0, 0.0, 0.0, 0.3, 6.0, 1.0],
+            [0.5, 0.0, 0.0, 0.0, 1.0, 3.0],
+        ];
+        let x = [1.0, -2.0, 0.5, 3.0, -1.0, 0.25];
+        let b: Vec<f64> = a.iter().map(|r| r.iter().zip(&x).map(|(p, q)| p * q).sum()).collect();
+        let got = solve6(a, b.try_into().unwrap()).unwrap();
+        assert!(got.iter().zip(&x).all(|(g, w)| (g - w).abs() < 1e-12), "{got:?}");
+        assert!(solve6([[0.0; 6]; 6], [1.0; 6]).is_none());
+        let r = corrected(&e, &[0.0, 0.0, 0.01, 0.001, 0.0, 0.0]);
+        assert!((rotation_angle_deg(&e.rotation, &r.rotation) - 0.01f64.to_degrees()).abs() < 1e-9);
+    }
+}
