@@ -38,6 +38,56 @@ fn params_file_configures_every_node_and_matches_the_rig() {
 }
 
 #[test]
+fn launch_file_starts_every_node_with_the_params_file() {
+    let file = root().join("launch-config/xsurf.launch.yaml");
+    let nodes = xsurf_nodes::launch::load(&file, &Default::default()).unwrap();
+    let names: Vec<String> = nodes.iter().map(|n| n.fq_name()).collect();
+    assert_eq!(
+        names,
+        [
+            "/c_arm_pose",
+            "/cam1/camera_driver",
+            "/cam1/edge_detector",
+            "/cam1/triangulator",
+            "/cam1/mesher",
+            "/cam2/camera_driver",
+            "/cam2/edge_detector",
+            "/cam2/triangulator",
+            "/cam2/mesher",
+            "/merger",
+            "/xray_aligner",
+        ]
+    );
+    let params = root().join("launch-config/params.yaml");
+    for n in &nodes {
+        assert!(components::NODE_NAMES.contains(&n.exec.as_str()), "{}", n.exec);
+        assert_eq!(n.param_files.len(), 1);
+        assert_eq!(std::fs::canonicalize(&n.param_files[0]).unwrap(), std::fs::canonicalize(&params).unwrap());
+        // Each node builds from the params file as the launcher passes it.
+        let ros = RosArgs::parse(&["--ros-args", "--params-file", n.param_files[0].to_str().unwrap()]).unwrap();
+        let o = ros.param_overrides(&n.fq_name()).unwrap();
+        let p = Params::resolve(&components::declarations(&n.exec).unwrap(), &o).unwrap();
+        components::build(&n.exec, &p).unwrap_or_else(|e| panic!("{}: {e}", n.fq_name()));
+    }
+    // A launch argument on the command line replaces the default.
+    let other = scratch("launch-arg").join("p.yaml");
+    std::fs::write(&other, "/**:\n  ros__parameters: {}\n").unwrap();
+    let cli = [("params".to_string(), other.to_string_lossy().into_owned())].into_iter().collect();
+    let nodes = xsurf_nodes::launch::load(&file, &cli).unwrap();
+    assert!(nodes.iter().all(|n| n.param_files == [other.clone()]));
+}
+
+#[test]
+fn a_bad_launch_file_is_named_and_refused() {
+    let dir = scratch("bad-launch");
+    let f = dir.join("x.launch.yaml");
+    std::fs::write(&f, "launch:\n- node: {exec: merger, param: [{from: /nope/p.yaml}]}\n").unwrap();
+    let out = xsurf(&["launch", f.to_str().unwrap()]);
+    assert_clean_failure(&out, 2, "/nope/p.yaml does not exist");
+    assert_clean_failure(&out, 2, "x.launch.yaml");
+}
+
+#[test]
 fn launch_file_names_our_executables() {
     let text = std::fs::read_to_string(root().join("launch-config/xsurf.launch.yaml")).unwrap();
     let doc: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
@@ -57,7 +107,7 @@ fn launch_file_names_our_executables() {
         }
     }
     walk(&doc, &mut execs);
-    assert_eq!(execs.len(), 10, "{execs:?}");
+    assert_eq!(execs.len(), 11, "{execs:?}");
     for e in &execs {
         assert!(components::NODE_NAMES.contains(&e.as_str()), "{e}");
     }

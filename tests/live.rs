@@ -1,7 +1,8 @@
 //! The live graph: c_arm_pose, two synthetic camera_drivers, edge_detector, triangulator and
-//! mesher per camera, and the merger, over DDS inside a private network namespace, composed in
-//! one process and as separate processes. One scan of the study's pyramid; the merged surface
-//! the merger writes is measured against the true pyramid.
+//! mesher per camera, the merger and the xray_aligner, started by `xsurf launch` from the
+//! committed launch file over DDS inside a private network namespace, as separate processes and
+//! composed in one. One scan of the study's pyramid; the merged surface the merger writes is
+//! measured against the true pyramid. And a node that dies stops the launch with exit 1.
 #![allow(clippy::unwrap_used)]
 
 mod common;
@@ -18,7 +19,7 @@ fn live(mode: &str, seconds: u32) {
     std::fs::write(
         &params,
         format!(
-            "/**:\n  ros__parameters:\n    laser_plane: [0.0, 1.0, 0.0, 0.0]\n    output_dir: {}\n/**/camera_driver:\n  ros__parameters:\n    width: 320\n    height: 240\n    fps: 15.0\n/c_arm_pose:\n  ros__parameters:\n    speed: 0.07\n    start_delay_s: 1.5\n/merger:\n  ros__parameters:\n    merge_delay_s: 1.0\n",
+            "/**:\n  ros__parameters:\n    laser_plane: [0.0, 1.0, 0.0, 0.0]\n    output_dir: {}\n/**/camera_driver:\n  ros__parameters:\n    width: 320\n    height: 240\n    fps: 15.0\n/c_arm_pose:\n  ros__parameters:\n    speed: 0.07\n    start_delay_s: 4.0\n/merger:\n  ros__parameters:\n    merge_delay_s: 1.0\n",
             files.display()
         ),
     )
@@ -29,6 +30,7 @@ fn live(mode: &str, seconds: u32) {
         .args([
             mode,
             bin_dir.to_str().unwrap(),
+            root().join("launch-config/xsurf.launch.yaml").to_str().unwrap(),
             params.to_str().unwrap(),
             out.join("logs").to_str().unwrap(),
             &seconds.to_string(),
@@ -49,7 +51,7 @@ fn live(mode: &str, seconds: u32) {
     };
     assert!(run.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&run.stderr));
     let exits = stdout.lines().find_map(|l| l.strip_prefix("exits ")).unwrap_or("");
-    assert!(exits.split(' ').all(|c| c == "0"), "every node leaves cleanly on SIGTERM: {exits}\n{}", logs());
+    assert_eq!(exits, "0", "the launcher and every node leave cleanly on SIGTERM\n{}", logs());
     let scan = files.join("scan_1");
     for f in ["cam1.ply", "cam2.ply", "merged.ply", "scene.wrl", "scene.glb", "preview.png"] {
         assert!(scan.join(f).is_file(), "{f} missing after the scan's END\n{}", logs());
@@ -76,4 +78,28 @@ fn live(mode: &str, seconds: u32) {
 fn live_graph_composed_then_separate_processes() {
     live("composed", 60);
     live("separate", 60);
+}
+
+/// A node that dies (here: a merger given a parameter it refuses, so it exits 2 at start-up) is
+/// reported, the other nodes are stopped, and the launcher exits 1.
+#[test]
+fn a_node_that_dies_stops_the_launch() {
+    let netns = root().join("../shared/tools/netns-run");
+    let dir = scratch("launch-dies");
+    let launch = dir.join("dies.launch.yaml");
+    std::fs::write(
+        &launch,
+        "launch:\n- node: {exec: edge_detector, namespace: cam1}\n- node: {exec: merger, param: [{name: merge_delay_s, value: -5.0}]}\n",
+    )
+    .unwrap();
+    let xsurf = env!("CARGO_BIN_EXE_xsurf");
+    let out = Command::new(&netns)
+        .args(["env", "ROS_LOCALHOST_ONLY=1", "timeout", "60", xsurf, "launch", launch.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("/merger") && err.contains("exited unexpectedly"), "{err}");
+    assert!(err.contains("merge_delay_s"), "the node's own reason is shown: {err}");
+    assert!(!err.contains("did not stop"), "the others stopped on SIGTERM: {err}");
 }

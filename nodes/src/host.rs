@@ -116,13 +116,19 @@ pub fn compose(args: &[String]) -> ExitCode {
     }
     let mut nodes = Vec::new();
     for spec in &ros.user_args {
-        let (ns, ty) = spec.rsplit_once('/').unwrap_or(("", spec));
+        // `/ns/name=type`, or `/ns/type` for a node named as its type.
+        let (path, ty_given) = match spec.split_once('=') {
+            Some((p, t)) => (p, Some(t)),
+            None => (spec.as_str(), None),
+        };
+        let (ns, name) = path.rsplit_once('/').unwrap_or(("", path));
+        let ty = ty_given.unwrap_or(name);
         let Some(&node) = components::NODE_NAMES.iter().find(|n| **n == ty) else {
             eprintln!("xsurf compose: {spec}: unknown node type {ty:?} (known: {})", components::NODE_NAMES.join(", "));
             return ExitCode::from(2);
         };
         let ns = xsurf_runtime::rosargs::normalize_ns(ns);
-        match node_config(node, node, &ns, &ros) {
+        match node_config(node, name, &ns, &ros) {
             Ok(n) => nodes.push(n),
             Err(e) => {
                 eprintln!("{e}");

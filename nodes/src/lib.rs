@@ -2,12 +2,14 @@
 //!
 //! The nodes of the spec as transport-agnostic components ([`components`]), the conversions
 //! between messages and the algorithms ([`convert`]), the scanner's tf view ([`tf`]), the
-//! synthetic scan writer ([`synth`]) and offline reconstruction from a bag ([`offline`]).
+//! synthetic scan writer ([`synth`]), offline reconstruction from a bag ([`offline`]) and the
+//! launcher of ROS 2 YAML launch files ([`launch`]).
 #![deny(missing_docs)]
 
 pub mod components;
 pub mod convert;
 pub mod host;
+pub mod launch;
 pub mod offline;
 pub mod param_client;
 pub mod play;

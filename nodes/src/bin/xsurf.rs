@@ -36,8 +36,11 @@ const USAGE: &str = "usage:
       publish a bag over DDS with its original timing (honours ROS_DOMAIN_ID, ROS_LOCALHOST_ONLY)
   xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
       a node's parameters through the standard ROS 2 parameter services (like `ros2 param`)
-  xsurf compose /NS/NODE_TYPE... [--ros-args ...]
-      run several nodes in one process, connected in memory, every topic still on DDS";
+  xsurf compose /NS/NODE_TYPE... | /NS/NAME=NODE_TYPE... [--ros-args ...]
+      run several nodes in one process, connected in memory, every topic still on DDS
+  xsurf launch FILE [--composed] [NAME:=VALUE...]
+      start the nodes of a ROS 2 YAML launch file, one process each (or all in one with --composed);
+      a node that dies stops the others and the launcher exits 1";
 
 /// A command-line mistake: exit code 2.
 #[derive(Debug)]
@@ -336,11 +339,50 @@ fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
     }
 }
 
+fn cmd_launch(args: &[String]) -> ExitCode {
+    let mut file = None;
+    let mut composed = false;
+    let mut cli = std::collections::BTreeMap::new();
+    for a in args {
+        if a == "--composed" {
+            composed = true;
+        } else if let Some((k, v)) = a.split_once(":=") {
+            cli.insert(k.to_string(), v.to_string());
+        } else if file.is_none() && !a.starts_with('-') {
+            file = Some(PathBuf::from(a));
+        } else {
+            eprintln!("xsurf launch: unexpected argument {a:?}\n{USAGE}");
+            return ExitCode::from(2);
+        }
+    }
+    let Some(file) = file else {
+        eprintln!("xsurf launch: name a launch file\n{USAGE}");
+        return ExitCode::from(2);
+    };
+    let nodes = match xsurf_nodes::launch::load(&file, &cli) {
+        Ok(n) => n,
+        Err(e) => {
+            eprintln!("xsurf launch: error: {e:#}");
+            return ExitCode::from(2);
+        }
+    };
+    match xsurf_nodes::launch::run(&nodes, composed) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("xsurf launch: error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.first().map(String::as_str) == Some("compose") {
         // Logging levels come from its own ROS arguments.
         return xsurf_nodes::host::compose(&args[1..]);
+    }
+    if args.first().map(String::as_str) == Some("launch") {
+        return cmd_launch(&args[1..]);
     }
     xsurf_runtime::logging::init(log::LevelFilter::Info, vec![]);
     let r = match args.first().map(String::as_str) {
