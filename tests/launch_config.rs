@@ -112,3 +112,50 @@ fn launch_file_names_our_executables() {
         assert!(components::NODE_NAMES.contains(&e.as_str()), "{e}");
     }
 }
+
+#[test]
+fn rviz_config_shows_our_topics_in_the_table_frame() {
+    let text = std::fs::read_to_string(root().join("launch-config/xsurf.rviz")).unwrap();
+    let doc: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
+    let vm = &doc["Visualization Manager"];
+    assert_eq!(vm["Global Options"]["Fixed Frame"], "table");
+    let displays = vm["Displays"].as_sequence().unwrap();
+    let topics: Vec<(&str, &str)> = displays
+        .iter()
+        .filter_map(|d| Some((d["Class"].as_str()?, d["Topic"]["Value"].as_str()?)))
+        .collect();
+    // Every topic shown is one our nodes publish, with the type the display expects.
+    let published: std::collections::BTreeMap<String, String> = ["/cam1", "/cam2", "/"]
+        .iter()
+        .flat_map(|ns| {
+            components::NODE_NAMES.iter().filter_map(move |node| {
+                let decls = components::declarations(node)?;
+                let p = Params::resolve(&decls, &Default::default()).ok()?;
+                let c = components::build(node, &p).ok()?;
+                Some(
+                    c.outputs()
+                        .into_iter()
+                        .map(|port| {
+                            let t = xsurf_runtime::rosargs::resolve_topic(&port.topic, &xsurf_runtime::rosargs::normalize_ns(ns), node, &[]);
+                            (t, port.type_name.to_string())
+                        })
+                        .collect::<Vec<_>>(),
+                )
+            })
+        })
+        .flatten()
+        .collect();
+    let expect = |class: &str| match class {
+        "rviz_default_plugins/PointCloud2" => "sensor_msgs/msg/PointCloud2",
+        "rviz_default_plugins/Marker" => "visualization_msgs/msg/Marker",
+        "rviz_default_plugins/Image" => "sensor_msgs/msg/Image",
+        other => panic!("unexpected display {other}"),
+    };
+    for (class, topic) in &topics {
+        assert_eq!(published.get(*topic).map(String::as_str), Some(expect(class)), "{topic} ({class})");
+    }
+    for t in ["/surface/cloud", "/surface/mesh", "/cam1/mesh", "/xray/overlay", "/cam1/image_raw", "/cam2/image_raw"] {
+        assert!(topics.iter().any(|(_, x)| x == &t), "{t} not shown");
+    }
+    assert!(displays.iter().any(|d| d["Class"] == "rviz_default_plugins/TF"));
+}
