@@ -190,7 +190,11 @@ fn record_then_play_round_trips_every_message() {
 
 /// Runs `tests/py/rviz_standin.py MODE` in the network namespace; returns its summary and the
 /// surface points it received.
-fn peer(mode: &str, params: &std::path::Path, bag: Option<&std::path::Path>) -> Option<(serde_json::Value, Vec<[f32; 3]>)> {
+fn peer(
+    mode: &str,
+    params: &std::path::Path,
+    bag: Option<&std::path::Path>,
+) -> Option<(serde_json::Value, Vec<[f32; 3]>)> {
     let py = python()?;
     let netns = root().join("../shared/tools/netns-run");
     let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
@@ -203,7 +207,11 @@ fn peer(mode: &str, params: &std::path::Path, bag: Option<&std::path::Path>) -> 
     let run = cmd.output().unwrap();
     let stdout = String::from_utf8_lossy(&run.stdout);
     let log = std::fs::read_to_string(work.join("launch.log")).unwrap_or_default();
-    assert!(run.status.success(), "rviz_standin.py {mode} failed:\n{stdout}\n{}\n{log}", String::from_utf8_lossy(&run.stderr));
+    assert!(
+        run.status.success(),
+        "rviz_standin.py {mode} failed:\n{stdout}\n{}\n{log}",
+        String::from_utf8_lossy(&run.stderr)
+    );
     let s: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
     let bytes = std::fs::read(work.join("surface.f32")).unwrap_or_default();
     let pts = bytes

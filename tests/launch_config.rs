@@ -120,10 +120,8 @@ fn rviz_config_shows_our_topics_in_the_table_frame() {
     let vm = &doc["Visualization Manager"];
     assert_eq!(vm["Global Options"]["Fixed Frame"], "table");
     let displays = vm["Displays"].as_sequence().unwrap();
-    let topics: Vec<(&str, &str)> = displays
-        .iter()
-        .filter_map(|d| Some((d["Class"].as_str()?, d["Topic"]["Value"].as_str()?)))
-        .collect();
+    let topics: Vec<(&str, &str)> =
+        displays.iter().filter_map(|d| Some((d["Class"].as_str()?, d["Topic"]["Value"].as_str()?))).collect();
     // Every topic shown is one our nodes publish, with the type the display expects.
     let published: std::collections::BTreeMap<String, String> = ["/cam1", "/cam2", "/"]
         .iter()
@@ -136,7 +134,12 @@ fn rviz_config_shows_our_topics_in_the_table_frame() {
                     c.outputs()
                         .into_iter()
                         .map(|port| {
-                            let t = xsurf_runtime::rosargs::resolve_topic(&port.topic, &xsurf_runtime::rosargs::normalize_ns(ns), node, &[]);
+                            let t = xsurf_runtime::rosargs::resolve_topic(
+                                &port.topic,
+                                &xsurf_runtime::rosargs::normalize_ns(ns),
+                                node,
+                                &[],
+                            );
                             (t, port.type_name.to_string())
                         })
                         .collect::<Vec<_>>(),

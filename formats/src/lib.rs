@@ -8,7 +8,9 @@
 #![deny(missing_docs)]
 
 pub mod bag;
+pub mod calibration;
 pub mod dicom;
+pub mod frames;
 pub mod gltf;
 pub mod image;
 pub mod ply;

@@ -1,7 +1,11 @@
 //! `camera_driver`: publishes `image_raw` and `camera_info` (same stamp, frame
 //! `<camera>_optical_frame`). Source `synthetic`: the synthetic scanner renders what the camera
 //! sees with the C-arm where `/tf` says it is at the exposure, the laser on between a scan's
-//! START and END; CI and demos use it in place of a camera.
+//! START and END; CI and demos use it in place of a camera. Source `files`: an image sequence
+//! (the study's `frame_000.bmp`..., BMP/PNG/PGM/PPM) at `fps`, stamped from the rate or a
+//! sidecar file. camera_info comes from `camera_info_url` (the camera_calibration YAML) or the
+//! rig. `rotate_180` turns every image (the study's cameras hung upside down); the calibration
+//! must then describe the turned images.
 
 use super::decl;
 use crate::convert;
@@ -20,7 +24,27 @@ use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
 /// The parameters of `camera_driver`.
 pub fn declarations() -> Vec<ParamDecl> {
     vec![
-        decl("source", V::String("synthetic".into()), "", "image source: synthetic (files and v4l2 are not built yet)"),
+        decl("source", V::String("synthetic".into()), "", "image source: synthetic or files (v4l2 is not built yet)"),
+        decl(
+            "files",
+            V::String(String::new()),
+            "",
+            "files source: a directory (its .bmp/.png/.pgm/.ppm in name order) or a pattern such as /data/frame_%03d.bmp",
+        ),
+        decl(
+            "timestamps_file",
+            V::String(String::new()),
+            "",
+            "files source: one stamp per frame (seconds, or integer ns), else stamps from fps",
+        ),
+        decl("loop_files", V::Bool(false), "", "files source: start again after the last frame"),
+        decl(
+            "camera_info_url",
+            V::String(String::new()),
+            "",
+            "camera_calibration YAML (file:///path or a path); empty: the rig's intrinsics",
+        ),
+        decl("rotate_180", V::Bool(false), "", "turn every image by 180 degrees before publishing"),
         decl(
             "scene",
             V::String("pyramid".into()),
@@ -44,7 +68,16 @@ pub fn declarations() -> Vec<ParamDecl> {
     ]
 }
 
+/// Where the images come from.
+enum Source {
+    Synthetic,
+    Files { list: Vec<std::path::PathBuf>, stamps: Option<Vec<i64>>, repeat: bool },
+}
+
 struct Config {
+    source: Source,
+    camera_info: Option<xsurf_core::camera::CameraModel>,
+    rotate_180: bool,
     scene: Scene,
     camera: String,
     rig: Option<Rig>,
@@ -58,10 +91,40 @@ struct Config {
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
-    let source = p.string("source")?;
-    if source != "synthetic" {
-        return Err(Params::invalid("source", format!("{source:?}: only the synthetic source is built so far")));
-    }
+    let source = match p.string("source")?.as_str() {
+        "synthetic" => Source::Synthetic,
+        "files" => {
+            let spec = p.string("files")?;
+            let list = frame_list(&spec).map_err(|e| Params::invalid("files", e))?;
+            let ts = p.string("timestamps_file")?;
+            let stamps = if ts.is_empty() {
+                None
+            } else {
+                let s = read_stamps(std::path::Path::new(&ts)).map_err(|e| Params::invalid("timestamps_file", e))?;
+                if s.len() < list.len() {
+                    return Err(Params::invalid(
+                        "timestamps_file",
+                        format!("{ts}: {} stamps for {} frames", s.len(), list.len()),
+                    ));
+                }
+                Some(s)
+            };
+            Source::Files { list, stamps, repeat: p.bool("loop_files")? }
+        }
+        "v4l2" => {
+            return Err(Params::invalid("source", "v4l2: the V4L2 source is not built yet (use synthetic or files)"))
+        }
+        other => return Err(Params::invalid("source", format!("{other:?}: expected synthetic or files"))),
+    };
+    let url = p.string("camera_info_url")?;
+    let camera_info = if url.is_empty() {
+        None
+    } else {
+        let path = xsurf_formats::calibration::url_path(&url).map_err(|e| Params::invalid("camera_info_url", e))?;
+        let c =
+            xsurf_formats::calibration::read(&path).map_err(|e| Params::invalid("camera_info_url", e.to_string()))?;
+        Some(c.model().map_err(|e| Params::invalid("camera_info_url", e))?)
+    };
     let scene_name = p.string("scene")?;
     let scene = Scene::by_name(&scene_name).ok_or_else(|| {
         Params::invalid("scene", format!("unknown scene {scene_name:?} (known: {})", SCENE_NAMES.join(", ")))
@@ -93,6 +156,9 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         Some(serde_yaml::from_str::<Rig>(&text).map_err(|e| Params::invalid("rig_file", format!("{rig_file}: {e}")))?)
     };
     Ok(Config {
+        source,
+        camera_info,
+        rotate_180: p.bool("rotate_180")?,
         scene,
         camera: p.string("camera")?,
         rig,
@@ -106,6 +172,68 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     })
 }
 
+/// The frames of a `files` spec: a directory's image files in name order, or a printf-style
+/// pattern (`frame_%03d.bmp`) counted from 0 (or 1) until the first missing number.
+fn frame_list(spec: &str) -> Result<Vec<std::path::PathBuf>, String> {
+    use std::path::{Path, PathBuf};
+    if spec.is_empty() {
+        return Err("the files source needs a directory or a pattern".into());
+    }
+    let is_frame = |p: &Path| {
+        p.extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .is_some_and(|e| ["bmp", "png", "pgm", "ppm", "pnm"].contains(&e.as_str()))
+    };
+    let path = Path::new(spec);
+    let list: Vec<PathBuf> = if path.is_dir() {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(path)
+            .map_err(|e| format!("{spec}: {e}"))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| is_frame(p))
+            .collect();
+        v.sort();
+        v
+    } else if let Some(i) = spec.find('%') {
+        let end = spec[i..].find('d').map(|j| i + j).ok_or_else(|| format!("{spec}: pattern needs %d or %0Nd"))?;
+        let width: usize = spec[i + 1..end].trim_start_matches('0').parse().unwrap_or(0);
+        let name = |n: usize| PathBuf::from(format!("{}{n:0width$}{}", &spec[..i], &spec[end + 1..]));
+        let first = if name(0).is_file() { 0 } else { 1 };
+        (first..).map(name).take_while(|p| p.is_file()).collect()
+    } else {
+        return Err(format!("{spec}: neither a directory nor a %d pattern"));
+    };
+    if list.is_empty() {
+        return Err(format!("{spec}: no frames (.bmp, .png, .pgm, .ppm)"));
+    }
+    Ok(list)
+}
+
+/// Stamps of a sidecar file: one per line, seconds (with a decimal point) or integer ns.
+fn read_stamps(path: &std::path::Path) -> Result<Vec<i64>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let l = line.trim();
+        if l.is_empty() || l.starts_with('#') {
+            continue;
+        }
+        let v = if l.contains('.') || l.contains('e') {
+            l.parse::<f64>().ok().filter(|v| v.is_finite()).map(|s| (s * 1e9).round() as i64)
+        } else {
+            l.parse::<i64>().ok()
+        };
+        out.push(v.ok_or_else(|| format!("{} line {}: {l:?} is not a stamp", path.display(), i + 1))?);
+    }
+    Ok(out)
+}
+
+/// Turns an image by 180 degrees (pixel order reversed, pixels kept whole).
+fn rotate_180(img: &mut xsurf_core::image::Image) {
+    let n = img.encoding.bytes_per_pixel();
+    let px: Vec<Vec<u8>> = img.data.chunks_exact(n).rev().map(<[u8]>::to_vec).collect();
+    img.data = px.concat();
+}
+
 /// The camera driver component.
 pub struct CameraDriverNode {
     cfg: Config,
@@ -117,6 +245,9 @@ pub struct CameraDriverNode {
     next_ns: Option<i64>,
     frames: u64,
     skipped: u64,
+    next_file: usize,
+    first_ns: Option<i64>,
+    read_errors: u64,
 }
 
 impl CameraDriverNode {
@@ -132,6 +263,9 @@ impl CameraDriverNode {
             next_ns: None,
             frames: 0,
             skipped: 0,
+            next_file: 0,
+            first_ns: None,
+            read_errors: 0,
         })
     }
 
@@ -223,12 +357,82 @@ impl Component for CameraDriverNode {
         let behind = (now_ns - next) / self.cfg.period_ns;
         self.skipped += behind as u64;
         self.next_ns = Some(next + (behind + 1) * self.cfg.period_ns);
+        if let Source::Files { list, stamps, repeat } = &self.cfg.source {
+            let mut i = self.next_file;
+            if i >= list.len() {
+                if !*repeat {
+                    return;
+                }
+                i = 0;
+            }
+            self.next_file = i + 1;
+            let first = *self.first_ns.get_or_insert(now_ns);
+            let stamp = match stamps {
+                Some(s) => s[i],
+                None => first + ((self.frames + self.read_errors) as f64 * self.cfg.period_ns as f64) as i64,
+            };
+            let mut img = match xsurf_formats::frames::read_frame(&list[i]) {
+                Ok(img) => img,
+                Err(e) => {
+                    self.read_errors += 1;
+                    log::error!("camera_driver: {e}");
+                    return;
+                }
+            };
+            if self.cfg.rotate_180 {
+                rotate_180(&mut img);
+            }
+            let model = match &self.cfg.camera_info {
+                Some(m) => *m,
+                None => {
+                    let rig = self.cfg.rig.clone().unwrap_or_else(|| Rig::study(img.width, img.height));
+                    match rig.camera(&self.camera).map(|c| c.model()) {
+                        Some(Ok(m)) => m.scaled(img.width, img.height),
+                        _ => {
+                            log::error!(
+                                "camera_driver: camera {:?} is not in the rig and no camera_info_url is set",
+                                self.camera
+                            );
+                            return;
+                        }
+                    }
+                }
+            };
+            if (model.width, model.height) != (img.width, img.height) {
+                self.read_errors += 1;
+                log::error!(
+                    "camera_driver: {} is {}x{}, the calibration is for {}x{}",
+                    list[i].display(),
+                    img.width,
+                    img.height,
+                    model.width,
+                    model.height
+                );
+                return;
+            }
+            let header = convert::header(stamp, &format!("{}_optical_frame", self.camera));
+            out.publish(1, Msg::CameraInfo(Arc::new(convert::camera_info(&model, header.clone()))));
+            out.publish(0, Msg::Image(Arc::new(Image::from_image(header, img))));
+            self.frames += 1;
+            if self.next_file == list.len() && !*repeat {
+                log::info!("camera_driver: all {} frames published", list.len());
+            }
+            return;
+        }
         let Some(pose) = self.pose_at(now_ns) else { return };
         let laser = self.laser_on;
         let frame = self.frames;
+        let rotate = self.cfg.rotate_180;
+        let info = self.cfg.camera_info;
         let (img, model) = match self.scanner() {
             Ok((s, i)) => match s.rig.cameras[*i].model() {
-                Ok(m) => (s.render_at(*i, &pose, laser, frame), m),
+                Ok(m) => {
+                    let mut img = s.render_at(*i, &pose, laser, frame);
+                    if rotate {
+                        rotate_180(&mut img);
+                    }
+                    (img, info.unwrap_or(m))
+                }
                 Err(e) => {
                     log::error!("camera_driver: {e}");
                     return;
@@ -245,6 +449,118 @@ impl Component for CameraDriverNode {
         self.frames += 1;
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("frames", self.frames), ("frames_not_rendered_in_time", self.skipped)]
+        vec![("frames", self.frames), ("frames_not_rendered_in_time", self.skipped), ("read_errors", self.read_errors)]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::components::{build, declarations};
+    use std::cell::RefCell;
+    use std::rc::Rc;
+    use xsurf_runtime::router::Router;
+
+    #[test]
+    fn files_source_publishes_the_sequence_with_its_calibration_stamps_and_rotation() {
+        let dir = std::env::temp_dir().join(format!("xsurf-files-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        // Three frames of the synthetic scanner as the study stored them (8-bit BMP), a
+        // calibration file and a sidecar of stamps.
+        let rig = Rig::study(160, 120);
+        let scanner = Scanner::new(
+            Scene::by_name("pyramid").unwrap(),
+            rig.clone(),
+            LaserModel::default(),
+            ScanSettings::default(),
+        )
+        .unwrap();
+        let frames: Vec<_> = (0..3).map(|f| scanner.render(0, 20 + f)).collect();
+        for (i, f) in frames.iter().enumerate() {
+            xsurf_formats::frames::write_bmp_mono8(&dir.join(format!("frame_{i:03}.bmp")), f).unwrap();
+        }
+        let model = rig.cameras[0].model().unwrap();
+        let calib = dir.join("cam1.yaml");
+        xsurf_formats::calibration::write(
+            &calib,
+            &xsurf_formats::calibration::CameraCalibration::from_model("cam1", &model),
+        )
+        .unwrap();
+        std::fs::write(dir.join("stamps.txt"), "# exposure times\n12.5\n12.533333\n12566666667\n").unwrap();
+        let run = |extra: &[(&str, V)]| {
+            let mut o: std::collections::BTreeMap<String, V> = [
+                ("source", V::String("files".into())),
+                ("files", V::String(dir.join("frame_%03d.bmp").to_string_lossy().into())),
+                ("camera_info_url", V::String(format!("file://{}", calib.display()))),
+                ("fps", V::Double(100.0)),
+            ]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect();
+            for (k, v) in extra {
+                o.insert(k.to_string(), v.clone());
+            }
+            let p = Params::resolve(&declarations("camera_driver").unwrap(), &o).unwrap();
+            let mut router = Router::new();
+            router.add(build("camera_driver", &p).unwrap(), "camera_driver", "/cam1", &[]);
+            let seen: Rc<RefCell<Vec<(String, Msg)>>> = Rc::default();
+            let s = seen.clone();
+            router.set_tap(Box::new(move |t, m| s.borrow_mut().push((t.to_string(), m.clone()))));
+            for k in 0..10 {
+                router.tick(1_000_000_000 + k * 10_000_000);
+            }
+            let v = seen.borrow().clone();
+            v
+        };
+        let seen = run(&[("timestamps_file", V::String(dir.join("stamps.txt").to_string_lossy().into()))]);
+        let images: Vec<&Image> = seen
+            .iter()
+            .filter_map(|(t, m)| match m {
+                Msg::Image(i) if t == "/cam1/image_raw" => Some(i.as_ref()),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(images.len(), 3, "three frames, then it stops");
+        let stamps: Vec<i64> = images.iter().map(|i| i.header.stamp.nanos()).collect();
+        assert_eq!(stamps, [12_500_000_000, 12_533_333_000, 12_566_666_667]);
+        for (img, f) in images.iter().zip(&frames) {
+            assert_eq!(img.data, f.data);
+            assert_eq!(img.header.frame_id, "cam1_optical_frame");
+        }
+        let info = seen.iter().find_map(|(t, m)| match m {
+            Msg::CameraInfo(c) if t == "/cam1/camera_info" => Some(c.clone()),
+            _ => None,
+        });
+        assert_eq!(convert::camera_model(&info.unwrap()).unwrap(), model);
+        // Stamps from the rate, and the images turned.
+        let seen = run(&[("rotate_180", V::Bool(true)), ("loop_files", V::Bool(true))]);
+        let images: Vec<&Image> = seen
+            .iter()
+            .filter_map(|(_, m)| match m {
+                Msg::Image(i) => Some(i.as_ref()),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(images.len(), 10, "looping");
+        assert_eq!(images[1].header.stamp.nanos() - images[0].header.stamp.nanos(), 10_000_000);
+        let mut turned = frames[0].data.clone();
+        turned.reverse();
+        assert_eq!(images[0].data, turned);
+        assert_eq!(images[3].data, turned, "the loop starts again");
+        // Bad configuration is refused, naming the parameter.
+        let bad = |k: &str, v: V| {
+            let mut o = std::collections::BTreeMap::new();
+            o.insert("source".to_string(), V::String("files".into()));
+            o.insert("files".to_string(), V::String(dir.to_string_lossy().into()));
+            o.insert(k.to_string(), v);
+            let p = Params::resolve(&declarations("camera_driver").unwrap(), &o).unwrap();
+            CameraDriverNode::new(&p).err().map(|e| e.to_string()).unwrap_or_default()
+        };
+        assert!(bad("files", V::String("/no/such/dir".into())).contains("files"));
+        assert!(bad("camera_info_url", V::String("package://x/y.yaml".into())).contains("camera_info_url"));
+        assert!(bad("timestamps_file", V::String(dir.join("cam1.yaml").to_string_lossy().into()))
+            .contains("timestamps_file"));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
