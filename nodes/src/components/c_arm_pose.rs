@@ -1,13 +1,24 @@
-//! `c_arm_pose`: the C-arm's pose from the speed model: `table -> carm` on `/tf` and
-//! `/joint_states` (`carm_travel`, `carm_angle`) at `rate_hz`, the cameras' `carm -> <cam>_optical_frame`
-//! on `/tf_static` from the rig, and `/scan/events` START when travel begins and END when it
-//! reaches `travel_end_m`.
+//! `c_arm_pose`: the C-arm's pose: `table -> carm` on `/tf` and `/joint_states` (`carm_travel`,
+//! `carm_angle`), the cameras' `carm -> <cam>_optical_frame` on `/tf_static` from the rig, and
+//! `/scan/events` START / END / ABORT.
+//!
+//! `mode: speed` models the travel (`speed` from `travel_start_m` to `travel_end_m`, at
+//! `rate_hz`); a scan starts by itself (`auto_start`) or on a START request and ends at
+//! `travel_end_m` or on an END request. `mode: encoder` follows the scanner controller's position
+//! feed (`sensor_msgs/JointState` on `/carm/encoder`, joint `encoder_joint`): every sample becomes
+//! a `/tf` at its own stamp; a scan starts on a START request or (with `auto_start`) when the
+//! C-arm moves; it ends with END when the C-arm stops within `end_tolerance_m` of
+//! `travel_end_m` (or on an END request), and with ABORT when it stops elsewhere (a stall) or the
+//! feed falls silent for `max_gap_s` (a pose gap). Requests are `xsurf_msgs/ScanEvent` messages
+//! on `/scan/request` (event START, END or ABORT), from the hospital stack or
+//! `ros2 topic pub`.
 
 use super::decl;
 use crate::convert;
 use std::sync::Arc;
 use xsurf_core::pose::table_from_carm;
 use xsurf_core::rig::Rig;
+use xsurf_msgs::sensor_msgs::JointState as JointStateMsg;
 use xsurf_msgs::sensor_msgs::JointState;
 use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
@@ -28,10 +39,27 @@ pub fn declarations() -> Vec<ParamDecl> {
         decl("rig_file", V::String(String::new()), "", "rig YAML with the cameras' placement; empty: the study's rig"),
         decl("table_frame", V::String("table".into()), "", "fixed frame"),
         decl("carm_frame", V::String("carm".into()), "", "C-arm frame"),
+        decl("mode", V::String("speed".into()), "", "speed: the speed model; encoder: follow /carm/encoder"),
+        decl("encoder_joint", V::String("carm_travel".into()), "", "encoder mode: the joint of the travel (m)"),
+        decl("motion_threshold_m", V::Double(0.001), "m", "encoder mode: movement that starts a scan (auto_start)"),
+        decl("stop_time_s", V::Double(0.3), "s", "encoder mode: no movement for this long is a stop"),
+        decl(
+            "end_tolerance_m",
+            V::Double(0.005),
+            "m",
+            "encoder mode: a stop this close to travel_end_m is END, elsewhere ABORT (stall)",
+        ),
+        decl("max_gap_s", V::Double(0.2), "s", "encoder mode: silence of the feed during a scan is ABORT"),
     ]
 }
 
 struct Config {
+    encoder: bool,
+    joint: String,
+    motion_m: f64,
+    stop_ns: i64,
+    end_tol_m: f64,
+    max_gap_ns: i64,
     speed: f64,
     start: f64,
     end: f64,
@@ -62,7 +90,25 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         serde_yaml::from_str(&text).map_err(|e| Params::invalid("rig_file", format!("{rig_file}: {e}")))?
     };
     let id = p.i64("scan_id")?;
+    let encoder = match p.string("mode")?.as_str() {
+        "speed" => false,
+        "encoder" => true,
+        other => return Err(Params::invalid("mode", format!("{other:?}: expected speed or encoder"))),
+    };
+    let positive = |n: &str| -> Result<f64, ParamError> {
+        let v = p.f64(n)?;
+        if !(v > 0.0 && v.is_finite()) {
+            return Err(Params::invalid(n, format!("{v} must be positive")));
+        }
+        Ok(v)
+    };
     Ok(Config {
+        encoder,
+        joint: p.string("encoder_joint")?,
+        motion_m: positive("motion_threshold_m")?,
+        stop_ns: (positive("stop_time_s")? * 1e9) as i64,
+        end_tol_m: positive("end_tolerance_m")?,
+        max_gap_ns: (positive("max_gap_s")? * 1e9) as i64,
         speed,
         start: p.f64("travel_start_m")?,
         end: p.f64("travel_end_m")?,
@@ -85,7 +131,21 @@ pub struct CArmPoseNode {
     last_pub: i64,
     statics_sent: bool,
     scans: u64,
+    aborts: u64,
+    scan_id: u32,
+    /// Speed mode: where the travel stopped (an END request before travel_end_m).
+    stopped_at: Option<f64>,
+    /// Encoder mode: the newest sample (stamp, travel, angle) and the last movement.
+    encoder: Option<(i64, f64, f64)>,
+    rest: Option<(i64, f64)>,
+    start_requested: bool,
+    bad_samples: u64,
 }
+
+const IN_REQUEST: usize = 0;
+const IN_ENCODER: usize = 1;
+const OUT_TF: usize = 0;
+const OUT_EVENTS: usize = 3;
 
 impl CArmPoseNode {
     /// Builds the node from its parameters.
@@ -98,9 +158,23 @@ impl CArmPoseNode {
             last_pub: i64::MIN,
             statics_sent: false,
             scans: 0,
+            aborts: 0,
+            scan_id: 0,
+            stopped_at: None,
+            encoder: None,
+            rest: None,
+            start_requested: false,
+            bad_samples: 0,
+        })
+        .map(|mut n: Self| {
+            n.scan_id = n.cfg.scan_id;
+            n
         })
     }
     fn travel(&self, now: i64) -> f64 {
+        if let Some(t) = self.stopped_at {
+            return t;
+        }
         let dir = (self.cfg.end - self.cfg.start).signum();
         match self.start_ns {
             Some(t0) if now > t0 && !self.done => {
@@ -118,9 +192,100 @@ impl CArmPoseNode {
     fn event(&self, now: i64, event: u8) -> Msg {
         Msg::ScanEvent(Arc::new(ScanEvent {
             header: convert::header(now, &self.cfg.table_frame),
-            scan_id: self.cfg.scan_id,
+            scan_id: self.scan_id,
             event,
         }))
+    }
+
+    /// Ends the current scan with `event` (END or ABORT) at `stamp`.
+    fn finish_scan(&mut self, stamp: i64, event: u8, why: &str, out: &mut Outbox) {
+        if !self.scanning {
+            return;
+        }
+        self.scanning = false;
+        self.done = true;
+        if event == ScanEvent::END {
+            self.scans += 1;
+            log::info!("c_arm_pose: scan {} ended ({why})", self.scan_id);
+        } else {
+            self.aborts += 1;
+            log::warn!("c_arm_pose: scan {} aborted: {why}", self.scan_id);
+        }
+        out.publish(OUT_EVENTS, self.event(stamp, event));
+        self.scan_id += 1;
+    }
+
+    fn begin_scan(&mut self, stamp: i64, out: &mut Outbox) {
+        if self.scanning {
+            return;
+        }
+        self.scanning = true;
+        self.done = false;
+        self.stopped_at = None;
+        out.publish(OUT_EVENTS, self.event(stamp, ScanEvent::START));
+    }
+
+    fn publish_pose(&self, stamp: i64, travel: f64, angle: f64, velocity: f64, out: &mut Outbox) {
+        let pose = table_from_carm(travel, 0.0, angle);
+        out.publish(
+            OUT_TF,
+            Msg::Tf(Arc::new(TFMessage {
+                transforms: vec![convert::transform_stamped(stamp, &self.cfg.table_frame, &self.cfg.carm_frame, &pose)],
+            })),
+        );
+        let js = JointStateMsg {
+            header: convert::header(stamp, ""),
+            name: vec!["carm_travel".into(), "carm_angle".into()],
+            position: vec![travel, angle],
+            velocity: vec![velocity, 0.0],
+            effort: vec![],
+        };
+        out.publish(2, Msg::JointState(Arc::new(js)));
+    }
+
+    /// One encoder sample.
+    fn encoder_sample(&mut self, m: &JointStateMsg, out: &mut Outbox) -> Result<(), NodeError> {
+        let i = m.name.iter().position(|n| *n == self.cfg.joint).ok_or_else(|| {
+            self.bad_samples += 1;
+            NodeError::new(format!("/carm/encoder: no joint {:?} in {:?}", self.cfg.joint, m.name))
+        })?;
+        let travel = m.position.get(i).copied().filter(|v| v.is_finite()).ok_or_else(|| {
+            self.bad_samples += 1;
+            NodeError::new(format!("/carm/encoder: joint {:?} has no finite position", self.cfg.joint))
+        })?;
+        let angle =
+            m.name.iter().position(|n| n == "carm_angle").and_then(|j| m.position.get(j).copied()).unwrap_or(0.0);
+        let stamp = m.header.stamp.nanos();
+        let velocity = match self.encoder {
+            Some((t0, x0, _)) if stamp > t0 => (travel - x0) / ((stamp - t0) as f64 * 1e-9),
+            _ => 0.0,
+        };
+        self.encoder = Some((stamp, travel, angle));
+        self.publish_pose(stamp, travel, angle, velocity, out);
+        // Movement: the rest point moves with the C-arm; standing still keeps its stamp.
+        let moved = match self.rest {
+            Some((_, x)) => (travel - x).abs() >= self.cfg.motion_m,
+            None => false,
+        };
+        if self.rest.is_none() || moved {
+            let was_at_rest = self.rest.is_some();
+            self.rest = Some((stamp, travel));
+            if moved && was_at_rest && !self.scanning && (self.cfg.auto_start || self.start_requested) {
+                self.start_requested = false;
+                self.begin_scan(stamp, out);
+            }
+        } else if let Some((t_rest, _)) = self.rest {
+            if self.scanning && stamp - t_rest >= self.cfg.stop_ns {
+                if (travel - self.cfg.end).abs() <= self.cfg.end_tol_m {
+                    self.finish_scan(stamp, ScanEvent::END, "the C-arm stopped at the end of travel", out);
+                } else {
+                    let why =
+                        format!("stall: the C-arm stopped at {travel:.4} m, not at the end {:.4} m", self.cfg.end);
+                    self.finish_scan(stamp, ScanEvent::ABORT, &why, out);
+                }
+            }
+        }
+        Ok(())
     }
 }
 
@@ -129,7 +294,10 @@ impl Component for CArmPoseNode {
         "c_arm_pose"
     }
     fn inputs(&self) -> Vec<Port> {
-        Vec::new()
+        vec![
+            Port::new("/scan/request", ScanEvent::TYPE_NAME, QosClass::Reliable),
+            Port::new("/carm/encoder", JointState::TYPE_NAME, QosClass::Reliable),
+        ]
     }
     fn outputs(&self) -> Vec<Port> {
         vec![
@@ -150,8 +318,42 @@ impl Component for CArmPoseNode {
         self.cfg = c;
         Ok(())
     }
-    fn handle(&mut self, i: usize, m: &Msg, _out: &mut Outbox) -> Result<(), NodeError> {
-        Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name())))
+    fn handle(&mut self, i: usize, m: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+        match (i, m) {
+            (IN_REQUEST, Msg::ScanEvent(e)) => {
+                let stamp = e.header.stamp.nanos();
+                match e.event {
+                    ScanEvent::START if self.cfg.encoder => {
+                        // Starts now if the C-arm is moving, else at its first movement.
+                        self.start_requested = true;
+                    }
+                    ScanEvent::START => {
+                        if !self.scanning {
+                            self.start_ns = Some(stamp);
+                            self.done = false;
+                            self.stopped_at = None;
+                        }
+                    }
+                    ScanEvent::END => {
+                        if !self.cfg.encoder {
+                            self.stopped_at = Some(self.travel(stamp));
+                        }
+                        self.finish_scan(stamp, ScanEvent::END, "END requested", out);
+                    }
+                    ScanEvent::ABORT => {
+                        if !self.cfg.encoder {
+                            self.stopped_at = Some(self.travel(stamp));
+                        }
+                        self.finish_scan(stamp, ScanEvent::ABORT, "ABORT requested", out);
+                    }
+                    other => return Err(NodeError::new(format!("/scan/request: unknown event {other}"))),
+                }
+                Ok(())
+            }
+            (IN_ENCODER, Msg::JointState(js)) if self.cfg.encoder => self.encoder_sample(js, out),
+            (IN_ENCODER, Msg::JointState(_)) => Ok(()),
+            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+        }
     }
     fn tick(&mut self, now: i64, out: &mut Outbox) {
         if !self.statics_sent {
@@ -173,9 +375,18 @@ impl Component for CArmPoseNode {
                     .collect(),
             };
             out.publish(1, Msg::Tf(Arc::new(tf)));
-            if self.cfg.auto_start {
+            if self.cfg.auto_start && !self.cfg.encoder {
                 self.start_ns = Some(now + self.cfg.delay_ns);
             }
+        }
+        if self.cfg.encoder {
+            if let Some((t, _, _)) = self.encoder {
+                if self.scanning && now - t > self.cfg.max_gap_ns {
+                    let why = format!("pose gap: no /carm/encoder sample for {:.3} s", (now - t) as f64 * 1e-9);
+                    self.finish_scan(now, ScanEvent::ABORT, &why, out);
+                }
+            }
+            return;
         }
         if let Some(t0) = self.start_ns {
             if !self.scanning && !self.done && now >= t0 {
@@ -186,35 +397,174 @@ impl Component for CArmPoseNode {
         if now.saturating_sub(self.last_pub) >= self.cfg.period_ns {
             self.last_pub = now;
             let travel = self.travel(now);
-            let pose = table_from_carm(travel, 0.0, 0.0);
-            out.publish(
-                0,
-                Msg::Tf(Arc::new(TFMessage {
-                    transforms: vec![convert::transform_stamped(
-                        now,
-                        &self.cfg.table_frame,
-                        &self.cfg.carm_frame,
-                        &pose,
-                    )],
-                })),
-            );
-            let js = JointState {
-                header: convert::header(now, ""),
-                name: vec!["carm_travel".into(), "carm_angle".into()],
-                position: vec![travel, 0.0],
-                velocity: vec![if self.scanning { self.cfg.speed } else { 0.0 }, 0.0],
-                effort: vec![],
-            };
-            out.publish(2, Msg::JointState(Arc::new(js)));
+            let v = if self.scanning { self.cfg.speed } else { 0.0 };
+            self.publish_pose(now, travel, 0.0, v, out);
             if self.scanning && (travel - self.cfg.end).abs() < 1e-12 {
-                self.scanning = false;
-                self.done = true;
-                self.scans += 1;
-                out.publish(3, self.event(now, ScanEvent::END));
+                self.finish_scan(now, ScanEvent::END, "travel_end_m reached", out);
             }
         }
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("scans", self.scans)]
+        vec![("scans", self.scans), ("aborts", self.aborts), ("bad_samples", self.bad_samples)]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::components::{build, declarations};
+    use std::cell::RefCell;
+    use std::rc::Rc;
+    use xsurf_runtime::router::Router;
+
+    type Seen = Rc<RefCell<Vec<(String, Msg)>>>;
+
+    fn node(set: &[(&str, V)]) -> (Router, Seen) {
+        let o = set.iter().map(|(k, v)| (k.to_string(), v.clone())).collect();
+        let p = Params::resolve(&declarations("c_arm_pose").unwrap(), &o).unwrap();
+        let mut r = Router::new();
+        r.add(build("c_arm_pose", &p).unwrap(), "c_arm_pose", "/", &[]);
+        let seen: Seen = Rc::default();
+        let s = seen.clone();
+        r.set_tap(Box::new(move |t, m| s.borrow_mut().push((t.to_string(), m.clone()))));
+        (r, seen)
+    }
+
+    fn events(seen: &Seen) -> Vec<(u32, u8, i64)> {
+        seen.borrow()
+            .iter()
+            .filter_map(|(_, m)| match m {
+                Msg::ScanEvent(e) => Some((e.scan_id, e.event, e.header.stamp.nanos())),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn request(r: &mut Router, t: i64, event: u8) {
+        let e = ScanEvent { header: convert::header(t, "table"), scan_id: 0, event };
+        r.publish("/scan/request", &Msg::ScanEvent(Arc::new(e)));
+    }
+
+    fn encoder(r: &mut Router, t: i64, travel: f64) {
+        let js = JointStateMsg {
+            header: convert::header(t, ""),
+            name: vec!["carm_travel".into()],
+            position: vec![travel],
+            ..Default::default()
+        };
+        r.publish("/carm/encoder", &Msg::JointState(Arc::new(js)));
+    }
+
+    const MS: i64 = 1_000_000;
+
+    #[test]
+    fn speed_model_starts_and_stops_on_request_and_numbers_the_scans() {
+        let (mut r, seen) = node(&[("auto_start", V::Bool(false))]);
+        for k in 0..50 {
+            r.tick(k * 10 * MS);
+        }
+        assert!(events(&seen).is_empty(), "no scan without a request");
+        request(&mut r, 500 * MS, ScanEvent::START);
+        for k in 50..150 {
+            r.tick(k * 10 * MS);
+        }
+        request(&mut r, 1_500 * MS, ScanEvent::END);
+        for k in 150..200 {
+            r.tick(k * 10 * MS);
+        }
+        let e = events(&seen);
+        assert_eq!(e, [(1, ScanEvent::START, 500 * MS), (1, ScanEvent::END, 1_500 * MS)]);
+        // The C-arm stopped where the END came: 1 s at 0.07 m/s from -0.18.
+        let last_tf = seen.borrow().iter().rev().find_map(|(t, m)| match m {
+            Msg::Tf(tf) if t == "/tf" => Some(tf.transforms[0].transform.translation.y),
+            _ => None,
+        });
+        assert!((last_tf.unwrap() - (-0.18 + 0.07)).abs() < 1e-9);
+        // A second scan runs to the end of travel with the next id.
+        request(&mut r, 2_000 * MS, ScanEvent::START);
+        for k in 200..800 {
+            r.tick(k * 10 * MS);
+        }
+        let e = events(&seen);
+        assert_eq!(&e[2..], [(2, ScanEvent::START, 2_000 * MS), (2, ScanEvent::END, e[3].2)]);
+        assert!((e[3].2 - (2_000 * MS + (0.36 / 0.07 * 1e9) as i64)).abs() <= 10 * MS);
+    }
+
+    #[test]
+    fn encoder_feed_gives_tf_at_its_stamps_and_scan_events_from_the_motion() {
+        let (mut r, seen) = node(&[("mode", V::String("encoder".into()))]);
+        r.tick(0);
+        // At rest, then 0.07 m/s from -0.18 to 0.18, then at rest at the end.
+        let mut t = 0;
+        for _ in 0..20 {
+            encoder(&mut r, t, -0.18);
+            t += 10 * MS;
+        }
+        let t_move = t;
+        let mut x: f64 = -0.18;
+        while x < 0.18 {
+            x = (x + 0.0007).min(0.18);
+            encoder(&mut r, t, x);
+            t += 10 * MS;
+        }
+        for _ in 0..50 {
+            encoder(&mut r, t, 0.18);
+            r.tick(t);
+            t += 10 * MS;
+        }
+        let e = events(&seen);
+        assert_eq!(e.len(), 2, "{e:?}");
+        assert_eq!((e[0].0, e[0].1), (1, ScanEvent::START));
+        assert!(e[0].2 > t_move && e[0].2 <= t_move + 20 * MS, "START at the first millimetre of motion");
+        assert_eq!((e[1].0, e[1].1), (1, ScanEvent::END));
+        let tf_stamps: Vec<i64> = seen
+            .borrow()
+            .iter()
+            .filter_map(|(topic, m)| match m {
+                Msg::Tf(tf) if topic == "/tf" => Some(tf.transforms[0].header.stamp.nanos()),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(tf_stamps.len(), 20 + 515 + 50);
+        assert_eq!(tf_stamps[..3], [0, 10 * MS, 20 * MS], "each sample at its own stamp");
+    }
+
+    #[test]
+    fn a_stall_or_a_silent_feed_aborts_the_scan() {
+        // Stall: stops half way.
+        let (mut r, seen) = node(&[("mode", V::String("encoder".into()))]);
+        r.tick(0);
+        let mut t = 0;
+        encoder(&mut r, t, -0.18);
+        for k in 1..=100 {
+            t += 10 * MS;
+            encoder(&mut r, t, -0.18 + 0.0007 * f64::from(k));
+        }
+        for _ in 0..40 {
+            t += 10 * MS;
+            encoder(&mut r, t, -0.11);
+            r.tick(t);
+        }
+        let e = events(&seen);
+        assert_eq!(e.iter().map(|e| e.1).collect::<Vec<_>>(), [ScanEvent::START, ScanEvent::ABORT]);
+        // Silence: the feed stops during the scan.
+        let (mut r, seen) = node(&[("mode", V::String("encoder".into()))]);
+        r.tick(0);
+        let mut t = 0;
+        for k in 0..=20 {
+            encoder(&mut r, t, -0.18 + 0.0007 * f64::from(k));
+            t += 10 * MS;
+        }
+        r.tick(t + 100 * MS);
+        assert_eq!(events(&seen).len(), 1, "a 0.1 s gap is tolerated");
+        r.tick(t + 300 * MS);
+        let e = events(&seen);
+        assert_eq!(e.iter().map(|e| e.1).collect::<Vec<_>>(), [ScanEvent::START, ScanEvent::ABORT]);
+        // A sample without the joint is refused, counted, and changes nothing.
+        let js = JointStateMsg { name: vec!["other".into()], position: vec![1.0], ..Default::default() };
+        r.publish("/carm/encoder", &Msg::JointState(Arc::new(js)));
+        let n = &r.nodes()[0];
+        assert_eq!(n.errors, 1);
+        assert!(n.last_error.as_deref().unwrap_or("").contains("no joint \"carm_travel\""));
     }
 }
