@@ -112,6 +112,24 @@ impl PoseTrack {
     pub fn latest_stamp(&self) -> Option<i64> {
         self.samples.back().map(|s| s.0)
     }
+    /// `table -> carm` at `stamp_ns`, extrapolated linearly from the two newest samples when the
+    /// stamp is after the newest by at most `max_ahead_ns` (a C-arm travelling at constant speed
+    /// is predicted exactly); otherwise as [`PoseTrack::at`].
+    pub fn predict(&self, stamp_ns: i64, max_ahead_ns: i64) -> Result<Iso3, PoseError> {
+        let n = self.samples.len();
+        match (n >= 2, self.samples.back()) {
+            (true, Some(b)) if stamp_ns > b.0 && stamp_ns - b.0 <= max_ahead_ns => {
+                let a = &self.samples[n - 2];
+                let gap_ns = b.0 - a.0;
+                if gap_ns <= 0 || gap_ns > self.max_gap_ns {
+                    return Err(PoseError::Gap { stamp_ns, gap_ns });
+                }
+                let t = (stamp_ns - a.0) as f64 / gap_ns as f64;
+                Ok(Iso3::from_parts(a.1 + (b.1 - a.1) * t, b.2))
+            }
+            _ => self.at(stamp_ns),
+        }
+    }
     /// `table -> carm` at `stamp_ns`.
     pub fn at(&self, stamp_ns: i64) -> Result<Iso3, PoseError> {
         let first = self.samples.front().ok_or(PoseError::Empty)?;
@@ -164,6 +182,19 @@ pub fn slerp(a: Quat, b: Quat, t: f64) -> Quat {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn prediction_is_exact_at_constant_speed_and_bounded() {
+        let mut t = PoseTrack::default();
+        for k in 0..5 {
+            t.push(k * 10_000_000, &table_from_carm(0.07 * k as f64 * 0.01, 0.0, 0.0));
+        }
+        let p = t.predict(47_000_000, 10_000_000).unwrap();
+        assert!((p.translation.y - 0.07 * 0.047).abs() < 1e-12);
+        assert!(t.predict(60_000_000, 10_000_000).is_err(), "beyond the bound");
+        let inside = t.predict(25_000_000, 10_000_000).unwrap();
+        assert!((inside.translation.y - 0.07 * 0.025).abs() < 1e-12, "interpolated inside");
+    }
 
     #[test]
     fn interpolates_travel_and_angle() {

@@ -52,6 +52,10 @@ impl TfBuffer {
     pub fn latest_pose_stamp(&self) -> Option<i64> {
         self.track.latest_stamp()
     }
+    /// `table -> carm` at a stamp, extrapolated up to `max_ahead_ns` past the newest sample.
+    pub fn predict_table_from_carm(&self, stamp_ns: i64, max_ahead_ns: i64) -> Result<Iso3, PoseError> {
+        self.track.predict(stamp_ns, max_ahead_ns)
+    }
     /// `table -> carm` at a stamp.
     pub fn table_from_carm(&self, stamp_ns: i64) -> Result<Iso3, PoseError> {
         self.track.at(stamp_ns)

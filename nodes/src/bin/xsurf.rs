@@ -24,8 +24,9 @@ use xsurf_nodes::{offline, synth};
 const USAGE: &str = "usage:
   xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S]
       synthesize a scan, reconstruct it, write the files and report the accuracy (default out: ./xsurf-demo)
-  xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--zstd]
-      write a synthetic scan as a rosbag2 bag plus its ground truth (scenes: pyramid, phantom, sphere, cylinder, box, body)
+  xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--zstd] [--frames N]
+      write a synthetic scan as a rosbag2 bag plus its ground truth and radiograph (scenes: pyramid, phantom,
+      sphere, cylinder, box, body); with --frames N, N frames per camera as PGM files instead (DIR/<camera>/)
   xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
       reconstruct a recorded scan offline: DIR/<cam>.ply, merged.ply, scene.wrl, scene.glb, report.json
   xsurf bag info DIR
@@ -155,11 +156,33 @@ fn cmd_synth(args: &[String]) -> anyhow::Result<()> {
     let a = Args::parse(
         args,
         &["--zstd"],
-        &["-o", "--out", "--size", "--speed", "--fps", "--encoding", "--seed", "--rig"],
+        &["-o", "--out", "--size", "--speed", "--fps", "--encoding", "--seed", "--rig", "--frames"],
     )?;
     let [scene] = a.positional.as_slice() else { return Err(usage("synth needs one SCENE")) };
     let out = a.get("-o").or(a.get("--out")).ok_or_else(|| usage("synth needs -o DIR"))?;
     let s = scanner(&a, scene)?;
+    if let Some(n) = a.get("--frames") {
+        // Image files for the camera_driver's files source: N frames from the middle of the scan.
+        let n: u32 = n.parse().map_err(|_| usage(format!("--frames {n}: not a count")))?;
+        let total = s.frame_count();
+        let first = total.saturating_sub(n) / 2;
+        for (ci, c) in s.rig.cameras.iter().enumerate() {
+            let dir = Path::new(out).join(&c.name);
+            std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+            for f in first..(first + n).min(total) {
+                let img = s.render(ci, f);
+                let path = dir.join(format!("frame_{:04}.pgm", f - first));
+                match img.encoding {
+                    xsurf_core::image::Encoding::Mono8 | xsurf_core::image::Encoding::Mono16 => {
+                        xsurf_formats::frames::write_pgm(&path, &img)?
+                    }
+                    _ => return Err(usage("--frames writes mono8 frames (PGM)")),
+                }
+            }
+        }
+        println!("wrote {} frames per camera as {out}/<camera>/frame_NNNN.pgm", n.min(total));
+        return Ok(());
+    }
     let summary = synth::write_bag(Path::new(out), &s, a.has("--zstd"), 1, progress_printer("synth"))?;
     println!(
         "wrote {out}: scene {}, {} frames x {} cameras, {} messages; ground truth in {out}/truth.json",

@@ -248,7 +248,13 @@ pub struct CameraDriverNode {
     next_file: usize,
     first_ns: Option<i64>,
     read_errors: u64,
+    /// Files source: decoded frames kept for the next round of a loop (up to `CACHE_BYTES`).
+    cache: Vec<Option<Arc<xsurf_core::image::Image>>>,
+    cache_bytes: usize,
 }
+
+/// Decoded frames kept in memory when looping a sequence.
+const CACHE_BYTES: usize = 1 << 30;
 
 impl CameraDriverNode {
     /// Builds the node from its parameters.
@@ -266,6 +272,8 @@ impl CameraDriverNode {
             next_file: 0,
             first_ns: None,
             read_errors: 0,
+            cache: Vec::new(),
+            cache_bytes: 0,
         })
     }
 
@@ -371,13 +379,26 @@ impl Component for CameraDriverNode {
                 Some(s) => s[i],
                 None => first + ((self.frames + self.read_errors) as f64 * self.cfg.period_ns as f64) as i64,
             };
-            let mut img = match xsurf_formats::frames::read_frame(&list[i]) {
-                Ok(img) => img,
-                Err(e) => {
-                    self.read_errors += 1;
-                    log::error!("camera_driver: {e}");
-                    return;
-                }
+            if self.cache.len() != list.len() {
+                self.cache = vec![None; list.len()];
+                self.cache_bytes = 0;
+            }
+            let mut img = match self.cache[i].as_deref() {
+                Some(img) => img.clone(),
+                None => match xsurf_formats::frames::read_frame(&list[i]) {
+                    Ok(img) => {
+                        if *repeat && self.cache_bytes + img.data.len() <= CACHE_BYTES {
+                            self.cache_bytes += img.data.len();
+                            self.cache[i] = Some(Arc::new(img.clone()));
+                        }
+                        img
+                    }
+                    Err(e) => {
+                        self.read_errors += 1;
+                        log::error!("camera_driver: {e}");
+                        return;
+                    }
+                },
             };
             if self.cfg.rotate_180 {
                 rotate_180(&mut img);

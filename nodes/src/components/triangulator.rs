@@ -59,6 +59,13 @@ pub fn declarations() -> Vec<ParamDecl> {
             "lines",
             "lines held while waiting for their pose; beyond this the oldest is placed or dropped",
         ),
+        decl(
+            "max_extrapolation_s",
+            V::Double(0.0),
+            "s",
+            "place a line up to this long after the newest table -> carm sample, extrapolating the travel linearly \
+             (0: wait for a sample after the image, exact interpolation)",
+        ),
     ]
 }
 
@@ -68,6 +75,7 @@ struct Config {
     carm_frame: String,
     max_gap_ns: i64,
     max_pending: usize,
+    max_extrapolation_ns: i64,
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
@@ -107,6 +115,13 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         carm_frame: p.string("carm_frame")?,
         max_gap_ns: (gap * 1e9) as i64,
         max_pending: pending as usize,
+        max_extrapolation_ns: {
+            let e = p.f64("max_extrapolation_s")?;
+            if !(0.0..=0.1).contains(&e) {
+                return Err(Params::invalid("max_extrapolation_s", format!("{e} is not in [0, 0.1]")));
+            }
+            (e * 1e9) as i64
+        },
     })
 }
 
@@ -176,12 +191,13 @@ impl TriangulatorNode {
     fn drain(&mut self, out: &mut Outbox, force: bool) -> Result<(), NodeError> {
         while let Some(line) = self.pending.front().cloned() {
             let stamp = line.header.stamp.nanos();
-            let ready = self.model.is_some() && self.tf.latest_pose_stamp().is_some_and(|l| l >= stamp);
+            let ahead = self.cfg.max_extrapolation_ns;
+            let ready = self.model.is_some() && self.tf.latest_pose_stamp().is_some_and(|l| l >= stamp - ahead);
             if !ready && !force && self.pending.len() <= self.cfg.max_pending {
                 return Ok(());
             }
             self.pending.pop_front();
-            let pose = match self.tf.table_from_carm(stamp) {
+            let pose = match self.tf.predict_table_from_carm(stamp, ahead) {
                 Ok(p) => p,
                 Err(e) => {
                     self.unplaced += 1;
