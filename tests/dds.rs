@@ -273,3 +273,26 @@ fn frames_published_from_python_come_back_as_a_surface() {
     assert_eq!(s["launch_exit"], 0, "{s}");
     assert_pyramid(&pts, "surface from frames published by Python");
 }
+
+/// use_sim_time: /clock from an independent peer drives the node's stamps; its log records
+/// reach /rosout as rcl_interfaces/msg/Log.
+#[test]
+fn sim_time_from_clock_and_logs_on_rosout() {
+    let Some(py) = python() else { return };
+    let netns = root().join("../shared/tools/netns-run");
+    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
+    let run = Command::new(&netns).arg(&py).arg(root().join("tests/py/sim_time.py")).arg(bin_dir).output().unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&run.stderr));
+    let s: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    assert!(s["tf_count"].as_u64().unwrap() > 10, "{s}");
+    // Every /tf stamp is simulated time (from 1000 s), none wall-clock time.
+    let (first, last) = (s["tf_first"].as_f64().unwrap(), s["tf_last"].as_f64().unwrap());
+    assert!(first >= 1000.0 && last <= s["sim_last"].as_f64().unwrap() + 0.5, "{s}");
+    let logs = s["logs"].as_array().unwrap();
+    let end = logs.iter().find(|l| l["msg"].as_str().unwrap_or("").contains("scan 1 ended"));
+    let end = end.unwrap_or_else(|| panic!("no end-of-scan record on /rosout: {s}"));
+    assert_eq!(end["name"], "c_arm_pose");
+    assert_eq!(end["level"], 20, "INFO");
+    assert_eq!(s["exit"], 0, "{s}");
+}

@@ -605,17 +605,30 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
         )?;
         log::info!("{}: subscribed {topic} ({})", router.nodes()[ni].name, p.type_name);
     }
-    if sim_time {
+    // ros2-client's spinner subscribes /clock itself, typed builtin_interfaces/Time (not
+    // rosgraph_msgs/Clock as ROS 2 has it); two types on one topic in one participant make
+    // RustDDS drop the topic. So /clock is read through a participant of its own, whose node
+    // never spins.
+    let _clock = if sim_time {
+        let cctx = env.context()?;
+        let name = NodeName::new("/", "_xsurf_clock").map_err(|e| HostError::Dds(format!("clock node: {e:?}")))?;
+        let mut cnode = cctx
+            .new_node(name, NodeOptions::new().enable_rosout(false))
+            .map_err(|e| HostError::Dds(format!("clock node: {e:?}")))?;
+        // Best effort, as rclcpp's ClockQoS: it matches reliable and best-effort publishers.
         subscribe(
-            dds_nodes[0].node(),
+            &mut cnode,
             "/clock",
             "rosgraph_msgs/msg/Clock",
-            qos(QosClass::Reliable),
+            qos(QosClass::Sensor),
             false,
             usize::MAX,
             feed.clone(),
         )?;
-    }
+        Some((cctx, cnode))
+    } else {
+        None
+    };
     drop(tx);
     drop(feed);
     let pub_errors = Arc::new(AtomicU64::new(0));
@@ -682,7 +695,8 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => break,
         }
-        if last_tick.elapsed() >= tick_period {
+        // With simulated time, time does not start before the first /clock message.
+        if last_tick.elapsed() >= tick_period && (!sim_time || clock_ns.is_some()) {
             last_tick = Instant::now();
             router.tick(now_ns(clock_ns));
         }

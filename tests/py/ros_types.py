@@ -194,3 +194,19 @@ class Marker(IdlStruct, typename="visualization_msgs::msg::dds_::Marker_"):
     mesh_resource: str = ""
     mesh_file: MeshFile = field(default_factory=MeshFile)
     mesh_use_embedded_materials: bool = False
+
+
+@dataclass
+class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
+    clock: Time = field(default_factory=Time)
+
+
+@dataclass
+class Log(IdlStruct, typename="rcl_interfaces::msg::dds_::Log_"):
+    stamp: Time = field(default_factory=Time)
+    level: uint8 = 0
+    name: str = ""
+    msg: str = ""
+    file: str = ""
+    function: str = ""
+    line: uint32 = 0
