@@ -257,4 +257,9 @@ fn usage_errors_exit_2() {
     assert_clean_failure(&xsurf(&["reconstruct", "x", "--bogus"]), 2, "unknown option --bogus");
     assert_clean_failure(&xsurf(&["synth", "teapot", "-o", "/tmp/x"]), 2, "unknown scene \"teapot\"");
     assert_clean_failure(&xsurf(&["frobnicate"]), 2, "unknown command");
+    for cmd in [&["--help"][..], &["reconstruct", "--help"], &["launch", "-h"], &["bag", "info", "--help"]] {
+        let out = xsurf(cmd);
+        assert!(out.status.success(), "{cmd:?}");
+        assert!(String::from_utf8_lossy(&out.stdout).contains("xsurf reconstruct BAG"), "{cmd:?}");
+    }
 }

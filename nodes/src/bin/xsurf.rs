@@ -400,6 +400,11 @@ fn cmd_launch(args: &[String]) -> ExitCode {
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    // `xsurf CMD --help` (or -h) anywhere: the usage, exit 0.
+    if args.iter().any(|a| a == "--help" || a == "-h") && args.first().map(String::as_str) != Some("compose") {
+        println!("{USAGE}");
+        return ExitCode::SUCCESS;
+    }
     if args.first().map(String::as_str) == Some("compose") {
         // Logging levels come from its own ROS arguments.
         return xsurf_nodes::host::compose(&args[1..]);
