@@ -284,6 +284,7 @@ pub fn refine_camera(
         // Trim: keep the closest fraction.
         m.sort_by(|a, b| a.2.abs().total_cmp(&b.2.abs()));
         m.truncate(((m.len() as f64) * cfg.trim_fraction).ceil() as usize);
+
         let (mut ata, mut atb) = ([[0.0; 6]; 6], [0.0; 6]);
         for &(i, j, r) in &m {
             let (y, n) = (reference.points[j], reference.normals[j]);
@@ -312,7 +313,8 @@ pub fn refine_camera(
         e = corrected(&e, &x);
         let rot = Vec3::new(x[0], x[1], x[2]).norm();
         let tr = Vec3::new(x[3], x[4], x[5]).norm();
-        if rot < 1e-9 && tr < 1e-9 {
+        // Converged when a step moves no ray by more than a micrometre at a metre.
+        if rot < 1e-6 && tr < 1e-6 {
             break;
         }
     }
