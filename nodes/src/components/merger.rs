@@ -50,6 +50,13 @@ pub fn declarations() -> Vec<ParamDecl> {
             "if set, each scan's merged.ply, scene.wrl and scene.glb go to <output_dir>/scan_<id>/",
         ),
         decl("frame_id", V::String("table".into()), "", "frame of the merged cloud and mesh"),
+        decl(
+            "republish_s",
+            V::Double(2.0),
+            "s",
+            "the merged cloud and mesh are published again this often until the next scan, for viewers \
+             that join late or lose them (best effort) (0: once)",
+        ),
     ]
 }
 
@@ -60,6 +67,7 @@ struct Config {
     transparency: f32,
     output_dir: Option<PathBuf>,
     frame_id: String,
+    republish_ns: Option<i64>,
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
@@ -89,6 +97,13 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         transparency: transparency as f32,
         output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
         frame_id: p.string("frame_id")?,
+        republish_ns: {
+            let r = p.f64("republish_s")?;
+            if !(0.0..=3600.0).contains(&r) {
+                return Err(Params::invalid("republish_s", format!("{r} is not in [0, 3600]")));
+            }
+            (r > 0.0).then(|| (r * 1e9) as i64)
+        },
     })
 }
 
@@ -110,6 +125,8 @@ pub struct MergerNode {
     last_merge: Option<LastMerge>,
     merged_current: bool,
     bad_overlays: u64,
+    /// The last merge's outputs and when they were last published (set at the first tick).
+    last_outputs: Option<(Msg, Msg, Option<i64>)>,
 }
 
 impl MergerNode {
@@ -128,6 +145,7 @@ impl MergerNode {
             last_merge: None,
             merged_current: false,
             bad_overlays: 0,
+            last_outputs: None,
         })
     }
 
@@ -161,17 +179,17 @@ impl MergerNode {
         self.merges += 1;
         self.points += pts.len() as u64;
         self.triangles += merged.triangles.len() as u64;
-        out.publish(0, Msg::Cloud(Arc::new(cloud)));
-        out.publish(
-            1,
-            Msg::Marker(Arc::new(convert::mesh_marker(
-                &merged,
-                header,
-                "surface",
-                self.scan_id as i32,
-                1.0 - self.cfg.transparency,
-            ))),
-        );
+        let cloud = Msg::Cloud(Arc::new(cloud));
+        let marker = Msg::Marker(Arc::new(convert::mesh_marker(
+            &merged,
+            header,
+            "surface",
+            self.scan_id as i32,
+            1.0 - self.cfg.transparency,
+        )));
+        out.publish(0, cloud.clone());
+        out.publish(1, marker.clone());
+        self.last_outputs = Some((cloud, marker, None));
         self.write(self.scan_id, &merged, &meshes);
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
@@ -305,6 +323,7 @@ impl Component for MergerNode {
                         if self.pending_deadline.is_some() {
                             self.merge(out);
                         }
+                        self.last_outputs = None;
                         self.clouds.clear();
                         self.scan_id = e.scan_id;
                     }
@@ -326,6 +345,17 @@ impl Component for MergerNode {
     fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
         if self.pending_deadline.is_some_and(|d| now_ns >= d) {
             self.merge(out);
+        }
+        if let (Some(period), Some((cloud, marker, last))) = (self.cfg.republish_ns, self.last_outputs.as_mut()) {
+            match last {
+                None => *last = Some(now_ns),
+                Some(t) if now_ns - *t >= period => {
+                    *t = now_ns;
+                    out.publish(0, cloud.clone());
+                    out.publish(1, marker.clone());
+                }
+                _ => {}
+            }
         }
     }
     fn finish(&mut self, out: &mut Outbox) {

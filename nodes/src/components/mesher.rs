@@ -51,6 +51,13 @@ pub fn declarations() -> Vec<ParamDecl> {
             "how often the growing cloud is published during a scan (0: only at END)",
         ),
         decl(
+            "mesh_republish_s",
+            V::Double(2.0),
+            "s",
+            "after END the mesh marker is published again this often until the next scan, so viewers \
+             that join late or lose it (best effort) get it (0: once)",
+        ),
+        decl(
             "output_dir",
             V::String(String::new()),
             "",
@@ -75,6 +82,7 @@ pub fn declarations() -> Vec<ParamDecl> {
 struct Config {
     mesh: MeshConfig,
     cloud_period_ns: Option<i64>,
+    republish_ns: Option<i64>,
     output_dir: Option<PathBuf>,
     camera: String,
     frame_id: String,
@@ -102,9 +110,14 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         return Err(Params::invalid("gap_factor", format!("{gap_factor} must be > 1")));
     }
     let dir = p.string("output_dir")?;
+    let republish = p.f64("mesh_republish_s")?;
+    if !(0.0..=3600.0).contains(&republish) {
+        return Err(Params::invalid("mesh_republish_s", format!("{republish} is not in [0, 3600]")));
+    }
     Ok(Config {
         mesh,
         cloud_period_ns: (rate > 0.0).then(|| (1e9 / rate) as i64),
+        republish_ns: (republish > 0.0).then(|| (republish * 1e9) as i64),
         output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
         camera: p.string("camera")?,
         frame_id: p.string("frame_id")?,
@@ -160,6 +173,8 @@ pub struct MesherNode {
     grid: Grid,
     gaps: GapDetector,
     last_cloud_ns: i64,
+    /// The last scan's mesh marker and when it was last published (set at the first tick).
+    last_mesh: Option<(Arc<Marker>, Option<i64>)>,
     scans: u64,
     frames: u64,
     dropped_frames: u64,
@@ -188,6 +203,7 @@ impl MesherNode {
             grid: Grid::default(),
             gaps: GapDetector::default(),
             last_cloud_ns: i64::MIN,
+            last_mesh: None,
             scans: 0,
             frames: 0,
             dropped_frames: 0,
@@ -246,10 +262,9 @@ impl MesherNode {
         self.triangles += mesh.triangles.len() as u64;
         let header = convert::header(stamp, &self.cfg.frame_id);
         out.publish(OUT_CLOUD, Msg::Cloud(Arc::new(convert::grid_cloud(&grid, header.clone()))));
-        out.publish(
-            OUT_MESH,
-            Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header, &self.camera, self.scan_id as i32, 1.0))),
-        );
+        let marker = Arc::new(convert::mesh_marker(&mesh, header, &self.camera, self.scan_id as i32, 1.0));
+        out.publish(OUT_MESH, Msg::Marker(marker.clone()));
+        self.last_mesh = Some((marker, None));
         if grid.valid() == 0 {
             log::warn!("{}: scan {} has no points; nothing written", self.camera, self.scan_id);
             return;
@@ -337,6 +352,7 @@ impl Component for MesherNode {
                 match e.event {
                     ScanEvent::START => {
                         self.close(false, out);
+                        self.last_mesh = None;
                         self.start(e.scan_id);
                     }
                     ScanEvent::END if self.active => self.close(false, out),
@@ -347,6 +363,17 @@ impl Component for MesherNode {
                 Ok(())
             }
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+        }
+    }
+    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+        let (Some(period), Some((marker, last))) = (self.cfg.republish_ns, self.last_mesh.as_mut()) else { return };
+        match last {
+            None => *last = Some(now_ns),
+            Some(t) if now_ns - *t >= period => {
+                *t = now_ns;
+                out.publish(OUT_MESH, Msg::Marker(marker.clone()));
+            }
+            _ => {}
         }
     }
     fn finish(&mut self, out: &mut Outbox) {
