@@ -102,7 +102,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
             if !(0.0..=3600.0).contains(&r) {
                 return Err(Params::invalid("republish_s", format!("{r} is not in [0, 3600]")));
             }
-            (r > 0.0).then(|| (r * 1e9) as i64)
+            (r > 0.0).then_some((r * 1e9) as i64)
         },
     })
 }

@@ -117,7 +117,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     Ok(Config {
         mesh,
         cloud_period_ns: (rate > 0.0).then(|| (1e9 / rate) as i64),
-        republish_ns: (republish > 0.0).then(|| (republish * 1e9) as i64),
+        republish_ns: (republish > 0.0).then_some((republish * 1e9) as i64),
         output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
         camera: p.string("camera")?,
         frame_id: p.string("frame_id")?,
