@@ -154,6 +154,31 @@ pub struct CameraModel {
 }
 
 impl CameraModel {
+    /// From the ROS layout (`camera_info`, camera_calibration files): row-major `K` (at least 9
+    /// values), the distortion model's name and `D`; validated.
+    pub fn from_ros(
+        width: u32,
+        height: u32,
+        k: &[f64],
+        distortion_model: &str,
+        d: &[f64],
+    ) -> Result<CameraModel, CameraError> {
+        if k.len() < 9 {
+            return Err(CameraError::InvalidIntrinsics(format!("K has {} values, needs 9", k.len())));
+        }
+        let m = CameraModel {
+            width,
+            height,
+            fx: k[0],
+            fy: k[4],
+            cx: k[2],
+            cy: k[5],
+            distortion: Distortion::from_ros(distortion_model, d)?,
+        };
+        m.validate()?;
+        Ok(m)
+    }
+
     /// Checks that the intrinsics can be used.
     pub fn validate(&self) -> Result<(), CameraError> {
         let ok = |v: f64| v.is_finite();

@@ -100,11 +100,7 @@ pub struct Radiograph {
 impl Radiograph {
     /// A radiograph with identity rescale and no window.
     pub fn new(width: u32, height: u32, pixels: Vec<u16>, bits_stored: u8) -> Result<Self, XrayError> {
-        let needed = width as usize * height as usize;
-        if pixels.len() != needed || needed == 0 {
-            return Err(XrayError::Size { width, height, needed, got: pixels.len() });
-        }
-        Ok(Self {
+        let r = Self {
             width,
             height,
             pixels,
@@ -114,7 +110,9 @@ impl Radiograph {
             rescale_intercept: 0.0,
             window: None,
             voi_lut: None,
-        })
+        };
+        r.validate()?;
+        Ok(r)
     }
 
     /// Checks the buffer against the size.
@@ -337,9 +335,13 @@ impl Placement {
 
     /// The point in `table` of (`col`, `row`) with the pose looked up by `pose_at(stamp_ns)`.
     pub fn point(&self, col: f64, row: f64, pose_at: &dyn Fn(i64) -> Result<Iso3, String>) -> Result<Vec3, XrayError> {
+        self.point_with_pose(col, &self.row_pose(row, pose_at)?)
+    }
+
+    /// `table -> carm` at row position `row`.
+    fn row_pose(&self, row: f64, pose_at: &dyn Fn(i64) -> Result<Iso3, String>) -> Result<Iso3, XrayError> {
         let stamp_ns = self.row_stamp(row);
-        let pose = pose_at(stamp_ns).map_err(|reason| XrayError::Pose { row, stamp_ns, reason })?;
-        self.point_with_pose(col, &pose)
+        pose_at(stamp_ns).map_err(|reason| XrayError::Pose { row, stamp_ns, reason })
     }
 
     /// A grid over the columns `cols` and all rows, with up to `max_col_strips` x
@@ -363,10 +365,7 @@ impl Placement {
         let mut g = PlacedGrid { columns: nc + 1, rows: nr + 1, ..PlacedGrid::default() };
         for k in 0..=nr {
             let row = f64::from(self.rows) * f64::from(k) / f64::from(nr);
-            let pose = {
-                let stamp_ns = self.row_stamp(row);
-                pose_at(stamp_ns).map_err(|reason| XrayError::Pose { row, stamp_ns, reason })?
-            };
+            let pose = self.row_pose(row, pose_at)?;
             let v = 1.0 - (f64::from(k) / f64::from(nr)) as f32;
             for j in 0..=nc {
                 let f = f64::from(j) / f64::from(nc);

@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-use xsurf_core::camera::{CameraModel, Distortion};
+use xsurf_core::camera::CameraModel;
 
 /// A matrix as the format stores it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -76,17 +76,8 @@ impl CameraCalibration {
         if d.data.len() != (d.rows * d.cols) as usize {
             return Err(format!("distortion_coefficients has {} values for {}x{}", d.data.len(), d.rows, d.cols));
         }
-        let m = CameraModel {
-            width: self.image_width,
-            height: self.image_height,
-            fx: k.data[0],
-            fy: k.data[4],
-            cx: k.data[2],
-            cy: k.data[5],
-            distortion: Distortion::from_ros(&self.distortion_model, &d.data).map_err(|e| e.to_string())?,
-        };
-        m.validate().map_err(|e| e.to_string())?;
-        Ok(m)
+        CameraModel::from_ros(self.image_width, self.image_height, &k.data, &self.distortion_model, &d.data)
+            .map_err(|e| e.to_string())
     }
 }
 

@@ -153,7 +153,7 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
     // Keep only the stored bits (sign-extended for signed data), then offset signed values into
     // u16 and move the offset into the rescale intercept.
     let shift = 16 - bits_stored.min(16);
-    let mut intercept_offset = 0.0;
+    let intercept_offset = if signed { -32768.0 } else { 0.0 };
     for p in &mut pixels {
         *p = if signed {
             let v = ((*p << shift) as i16) >> shift;
@@ -161,9 +161,6 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
         } else {
             (*p << shift) >> shift
         };
-    }
-    if signed {
-        intercept_offset = -32768.0;
     }
     let rescale = px.rescale().ok().and_then(|r| r.first().copied());
     let (slope, intercept) = rescale.map_or((1.0, 0.0), |r| (r.slope, r.intercept));

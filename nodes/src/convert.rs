@@ -1,6 +1,6 @@
 //! Conversions between messages and the algorithms' types.
 
-use xsurf_core::camera::{CameraError, CameraModel, Distortion};
+use xsurf_core::camera::{CameraError, CameraModel};
 use xsurf_core::edge::{LaserLine as CoreLine, Orientation};
 use xsurf_core::geom::{Iso3, Quat, Vec3};
 use xsurf_core::mesh::{Grid, Mesh};
@@ -23,17 +23,7 @@ pub fn camera_model(info: &CameraInfo) -> Result<CameraModel, CameraError> {
     if info.binning_x > 1 || info.binning_y > 1 || info.roi.width != 0 {
         return Err(CameraError::InvalidIntrinsics("binning and ROI in camera_info are not supported".into()));
     }
-    let m = CameraModel {
-        width: info.width,
-        height: info.height,
-        fx: info.k[0],
-        fy: info.k[4],
-        cx: info.k[2],
-        cy: info.k[5],
-        distortion: Distortion::from_ros(&info.distortion_model, &info.d)?,
-    };
-    m.validate()?;
-    Ok(m)
+    CameraModel::from_ros(info.width, info.height, &info.k, &info.distortion_model, &info.d)
 }
 
 /// A `CameraInfo` for intrinsics (no rectification: R = I, P = [K | 0]).

@@ -150,8 +150,10 @@ const OUT_EVENTS: usize = 3;
 impl CArmPoseNode {
     /// Builds the node from its parameters.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
+        let cfg = config(p)?;
         Ok(Self {
-            cfg: config(p)?,
+            scan_id: cfg.scan_id,
+            cfg,
             start_ns: None,
             scanning: false,
             done: false,
@@ -159,16 +161,11 @@ impl CArmPoseNode {
             statics_sent: false,
             scans: 0,
             aborts: 0,
-            scan_id: 0,
             stopped_at: None,
             encoder: None,
             rest: None,
             start_requested: false,
             bad_samples: 0,
-        })
-        .map(|mut n: Self| {
-            n.scan_id = n.cfg.scan_id;
-            n
         })
     }
     fn travel(&self, now: i64) -> f64 {

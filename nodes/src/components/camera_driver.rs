@@ -229,9 +229,12 @@ fn read_stamps(path: &std::path::Path) -> Result<Vec<i64>, String> {
 
 /// Turns an image by 180 degrees (pixel order reversed, pixels kept whole).
 fn rotate_180(img: &mut xsurf_core::image::Image) {
+    // Reversing the bytes reverses the pixel order and each pixel's bytes; turn those back.
+    img.data.reverse();
     let n = img.encoding.bytes_per_pixel();
-    let px: Vec<Vec<u8>> = img.data.chunks_exact(n).rev().map(<[u8]>::to_vec).collect();
-    img.data = px.concat();
+    if n > 1 {
+        img.data.chunks_exact_mut(n).for_each(<[u8]>::reverse);
+    }
 }
 
 /// The camera driver component.
@@ -251,6 +254,8 @@ pub struct CameraDriverNode {
     /// Files source: decoded frames kept for the next round of a loop (up to `CACHE_BYTES`).
     cache: Vec<Option<Arc<xsurf_core::image::Image>>>,
     cache_bytes: usize,
+    /// Files source without `camera_info_url`: the rig's intrinsics at the frames' size.
+    rig_model: Option<xsurf_core::camera::CameraModel>,
 }
 
 /// Decoded frames kept in memory when looping a sequence.
@@ -274,6 +279,7 @@ impl CameraDriverNode {
             read_errors: 0,
             cache: Vec::new(),
             cache_bytes: 0,
+            rig_model: None,
         })
     }
 
@@ -331,6 +337,7 @@ impl Component for CameraDriverNode {
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         self.cfg = config(p)?;
         self.scanner = None;
+        self.rig_model = None;
         Ok(())
     }
     fn handle(&mut self, input: usize, msg: &Msg, _out: &mut Outbox) -> Result<(), NodeError> {
@@ -403,12 +410,24 @@ impl Component for CameraDriverNode {
             if self.cfg.rotate_180 {
                 rotate_180(&mut img);
             }
-            let model = match &self.cfg.camera_info {
-                Some(m) => *m,
-                None => {
-                    let rig = self.cfg.rig.clone().unwrap_or_else(|| Rig::study(img.width, img.height));
+            let model = match (&self.cfg.camera_info, self.rig_model) {
+                (Some(m), _) => *m,
+                (None, Some(m)) if (m.width, m.height) == (img.width, img.height) => m,
+                (None, _) => {
+                    let study;
+                    let rig = match &self.cfg.rig {
+                        Some(r) => r,
+                        None => {
+                            study = Rig::study(img.width, img.height);
+                            &study
+                        }
+                    };
                     match rig.camera(&self.camera).map(|c| c.model()) {
-                        Some(Ok(m)) => m.scaled(img.width, img.height),
+                        Some(Ok(m)) => {
+                            let m = m.scaled(img.width, img.height);
+                            self.rig_model = Some(m);
+                            m
+                        }
                         _ => {
                             log::error!(
                                 "camera_driver: camera {:?} is not in the rig and no camera_info_url is set",

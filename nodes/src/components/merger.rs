@@ -125,8 +125,8 @@ pub struct MergerNode {
     last_merge: Option<LastMerge>,
     merged_current: bool,
     bad_overlays: u64,
-    /// The last merge's outputs and when they were last published (set at the first tick).
-    last_outputs: Option<(Msg, Msg, Option<i64>)>,
+    /// The last merge's cloud and mesh, published again between scans.
+    last_outputs: super::Republisher,
 }
 
 impl MergerNode {
@@ -145,7 +145,7 @@ impl MergerNode {
             last_merge: None,
             merged_current: false,
             bad_overlays: 0,
-            last_outputs: None,
+            last_outputs: super::Republisher::default(),
         })
     }
 
@@ -189,7 +189,7 @@ impl MergerNode {
         )));
         out.publish(0, cloud.clone());
         out.publish(1, marker.clone());
-        self.last_outputs = Some((cloud, marker, None));
+        self.last_outputs.set(vec![(0, cloud), (1, marker)]);
         self.write(self.scan_id, &merged, &meshes);
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
@@ -323,7 +323,7 @@ impl Component for MergerNode {
                         if self.pending_deadline.is_some() {
                             self.merge(out);
                         }
-                        self.last_outputs = None;
+                        self.last_outputs.clear();
                         self.clouds.clear();
                         self.scan_id = e.scan_id;
                     }
@@ -346,17 +346,7 @@ impl Component for MergerNode {
         if self.pending_deadline.is_some_and(|d| now_ns >= d) {
             self.merge(out);
         }
-        if let (Some(period), Some((cloud, marker, last))) = (self.cfg.republish_ns, self.last_outputs.as_mut()) {
-            match last {
-                None => *last = Some(now_ns),
-                Some(t) if now_ns - *t >= period => {
-                    *t = now_ns;
-                    out.publish(0, cloud.clone());
-                    out.publish(1, marker.clone());
-                }
-                _ => {}
-            }
-        }
+        self.last_outputs.tick(self.cfg.republish_ns, now_ns, out);
     }
     fn finish(&mut self, out: &mut Outbox) {
         if !self.merged_current {

@@ -173,8 +173,8 @@ pub struct MesherNode {
     grid: Grid,
     gaps: GapDetector,
     last_cloud_ns: i64,
-    /// The last scan's mesh marker and when it was last published (set at the first tick).
-    last_mesh: Option<(Arc<Marker>, Option<i64>)>,
+    /// The last scan's mesh marker, published again between scans.
+    last_mesh: super::Republisher,
     scans: u64,
     frames: u64,
     dropped_frames: u64,
@@ -203,7 +203,7 @@ impl MesherNode {
             grid: Grid::default(),
             gaps: GapDetector::default(),
             last_cloud_ns: i64::MIN,
-            last_mesh: None,
+            last_mesh: super::Republisher::default(),
             scans: 0,
             frames: 0,
             dropped_frames: 0,
@@ -262,9 +262,9 @@ impl MesherNode {
         self.triangles += mesh.triangles.len() as u64;
         let header = convert::header(stamp, &self.cfg.frame_id);
         out.publish(OUT_CLOUD, Msg::Cloud(Arc::new(convert::grid_cloud(&grid, header.clone()))));
-        let marker = Arc::new(convert::mesh_marker(&mesh, header, &self.camera, self.scan_id as i32, 1.0));
-        out.publish(OUT_MESH, Msg::Marker(marker.clone()));
-        self.last_mesh = Some((marker, None));
+        let marker = Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header, &self.camera, self.scan_id as i32, 1.0)));
+        out.publish(OUT_MESH, marker.clone());
+        self.last_mesh.set(vec![(OUT_MESH, marker)]);
         if grid.valid() == 0 {
             log::warn!("{}: scan {} has no points; nothing written", self.camera, self.scan_id);
             return;
@@ -352,7 +352,7 @@ impl Component for MesherNode {
                 match e.event {
                     ScanEvent::START => {
                         self.close(false, out);
-                        self.last_mesh = None;
+                        self.last_mesh.clear();
                         self.start(e.scan_id);
                     }
                     ScanEvent::END if self.active => self.close(false, out),
@@ -366,15 +366,7 @@ impl Component for MesherNode {
         }
     }
     fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
-        let (Some(period), Some((marker, last))) = (self.cfg.republish_ns, self.last_mesh.as_mut()) else { return };
-        match last {
-            None => *last = Some(now_ns),
-            Some(t) if now_ns - *t >= period => {
-                *t = now_ns;
-                out.publish(OUT_MESH, Msg::Marker(marker.clone()));
-            }
-            _ => {}
-        }
+        self.last_mesh.tick(self.cfg.republish_ns, now_ns, out);
     }
     fn finish(&mut self, out: &mut Outbox) {
         self.close(false, out);
