@@ -188,6 +188,30 @@ impl Mat3 {
         let (s, c) = angle_rad.sin_cos();
         Mat3 { m: [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]] }
     }
+    /// Rotation about X by `angle_rad`.
+    pub fn rot_x(angle_rad: f64) -> Mat3 {
+        let (s, c) = angle_rad.sin_cos();
+        Mat3 { m: [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]] }
+    }
+    /// Rotation about Z by `angle_rad`.
+    pub fn rot_z(angle_rad: f64) -> Mat3 {
+        let (s, c) = angle_rad.sin_cos();
+        Mat3 { m: [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]] }
+    }
+    /// The rotation by `|v|` radians about `v` (Rodrigues' formula).
+    pub fn from_rotation_vector(v: Vec3) -> Mat3 {
+        let angle = v.norm();
+        match v.try_normalize() {
+            Some(axis) if angle > 1e-300 => Quat::from_axis_angle(axis, angle).to_mat3(),
+            _ => Mat3::IDENTITY,
+        }
+    }
+    /// The angle of the rotation that takes `self` to `o` (both rotations), radians.
+    pub fn angle_to(&self, o: &Mat3) -> f64 {
+        let r = self.transpose().mul_mat(o);
+        let tr = r.m[0][0] + r.m[1][1] + r.m[2][2];
+        ((tr - 1.0) * 0.5).clamp(-1.0, 1.0).acos()
+    }
     /// Column `i`.
     pub fn column(&self, i: usize) -> Vec3 {
         Vec3::new(self.m[0][i], self.m[1][i], self.m[2][i])

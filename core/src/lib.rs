@@ -28,6 +28,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod calib;
 pub mod camera;
 pub mod edge;
 pub mod eval;

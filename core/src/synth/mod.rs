@@ -2,6 +2,7 @@
 //! the truth (the surface's signed distance and the points each camera can observe on the
 //! laser sheet). Deterministic for a seed.
 
+pub mod calib;
 pub mod scene;
 pub mod xray;
 

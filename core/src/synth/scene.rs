@@ -239,6 +239,11 @@ impl Scene {
         Some(Scene { name: name.to_string(), objects: all, travel_start_m: start, travel_end_m: end })
     }
 
+    /// The bare tabletop (for laser-plane calibration sets).
+    pub fn tabletop() -> Scene {
+        Scene { name: "tabletop".to_string(), objects: vec![table(-1.0, 2.5)], travel_start_m: -0.1, travel_end_m: 0.1 }
+    }
+
     /// The nearest hit along `origin + t * dir` with `t_min < t < t_max` (`dir` need not be unit).
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_min: f64, t_max: f64) -> Option<Hit> {
         let mut best: Option<Hit> = None;

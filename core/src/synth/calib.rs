@@ -1,0 +1,260 @@
+//! Synthetic calibration sets with known truth: a checkerboard seen at varied poses (for the
+//! intrinsics), lying on the tabletop (for the placement), and the laser line on the bare
+//! tabletop at several heights (for the laser plane; rendered by the [`Scanner`](super::Scanner)).
+
+use super::SplitMix;
+use crate::calib::board::BoardSpec;
+use crate::camera::CameraModel;
+use crate::geom::{Iso3, Mat3, Vec3};
+use crate::image::{Encoding, Image};
+
+/// How the printed board looks.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BoardLook {
+    /// White border around the squares, in squares.
+    pub margin_squares: f64,
+    /// Albedo of the black squares.
+    pub black: f64,
+    /// Albedo of the white squares and border.
+    pub white: f64,
+    /// Albedo of the surface around the board (in the board's plane).
+    pub background: f64,
+}
+
+impl Default for BoardLook {
+    fn default() -> Self {
+        Self { margin_squares: 0.75, black: 0.05, white: 0.85, background: 0.4 }
+    }
+}
+
+/// Light, optics and sensor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Exposure {
+    /// Grey level of a white surface at the image centre.
+    pub level: f64,
+    /// Fall-off of the light towards the image corners (0: none, 0.3: corners at 70 %).
+    pub vignetting: f64,
+    /// Sensor noise, grey levels (standard deviation).
+    pub noise_sigma: f64,
+    /// Optical blur (Gaussian sigma), pixels; 0 for a focused lens.
+    pub blur_px: f64,
+    /// Sub-samples per pixel side.
+    pub supersample: u32,
+}
+
+impl Default for Exposure {
+    fn default() -> Self {
+        Self { level: 215.0, vignetting: 0.25, noise_sigma: 2.0, blur_px: 0.0, supersample: 4 }
+    }
+}
+
+/// Undistorted rays at pixel corners, interpolated for sub-samples (one undistortion per
+/// pixel corner instead of one per sample).
+pub struct RayTable {
+    model: CameraModel,
+    rays: Vec<Vec3>,
+}
+
+impl RayTable {
+    /// The table of a camera.
+    pub fn new(model: &CameraModel) -> RayTable {
+        let (w, h) = (model.width as usize, model.height as usize);
+        let mut rays = Vec::with_capacity((w + 1) * (h + 1));
+        for y in 0..=h {
+            for x in 0..=w {
+                let (u, v) = (x as f64 - 0.5, y as f64 - 0.5);
+                rays.push(
+                    model.ray(u, v).unwrap_or(Vec3::new((u - model.cx) / model.fx, (v - model.cy) / model.fy, 1.0)),
+                );
+            }
+        }
+        RayTable { model: *model, rays }
+    }
+    /// The ray at pixel position `(u, v)` (ROS convention), z = 1.
+    pub fn ray(&self, u: f64, v: f64) -> Vec3 {
+        let w = self.model.width as usize;
+        let (gx, gy) = (u + 0.5, v + 0.5);
+        let (x0, y0) = (gx.floor().max(0.0) as usize, gy.floor().max(0.0) as usize);
+        let (x0, y0) = (x0.min(w - 1), y0.min(self.model.height as usize - 1));
+        let (fx, fy) = (gx - x0 as f64, gy - y0 as f64);
+        let s = w + 1;
+        let i = y0 * s + x0;
+        let top = self.rays[i].lerp(self.rays[i + 1], fx);
+        let bottom = self.rays[i + s].lerp(self.rays[i + s + 1], fx);
+        top.lerp(bottom, fy)
+    }
+}
+
+fn board_albedo(spec: &BoardSpec, look: &BoardLook, x: f64, y: f64) -> f64 {
+    let s = spec.square_m;
+    let (a, b) = ((x / s).floor(), (y / s).floor());
+    let inside_squares = a >= -1.0 && b >= -1.0 && a <= spec.cols as f64 - 1.0 && b <= spec.rows as f64 - 1.0;
+    if inside_squares {
+        return if BoardSpec::square_is_black(a as i64, b as i64) { look.black } else { look.white };
+    }
+    let m = (1.0 + look.margin_squares) * s;
+    let on_board = x >= -m && y >= -m && x <= (spec.cols as f64 - 1.0) * s + m && y <= (spec.rows as f64 - 1.0) * s + m;
+    if on_board {
+        look.white
+    } else {
+        look.background
+    }
+}
+
+/// Renders the board at `optical_from_board` (mono8).
+pub fn render_board(
+    rays: &RayTable,
+    optical_from_board: &Iso3,
+    spec: &BoardSpec,
+    look: &BoardLook,
+    exposure: &Exposure,
+    seed: u64,
+) -> Image {
+    let m = &rays.model;
+    let (w, h) = (m.width as usize, m.height as usize);
+    let n = exposure.supersample.max(1) as usize;
+    let normal = optical_from_board.rotation.column(2);
+    let origin = optical_from_board.translation;
+    let board_from_optical = optical_from_board.inverse();
+    let mut lin = vec![0.0f64; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = 0.0;
+            for sy in 0..n {
+                for sx in 0..n {
+                    let u = x as f64 + (sx as f64 + 0.5) / n as f64 - 0.5;
+                    let v = y as f64 + (sy as f64 + 0.5) / n as f64 - 0.5;
+                    let d = rays.ray(u, v);
+                    let den = normal.dot(d);
+                    let t = if den.abs() > 1e-12 { normal.dot(origin) / den } else { -1.0 };
+                    acc += if t > 0.0 {
+                        let p = board_from_optical.transform_point(d * t);
+                        board_albedo(spec, look, p.x, p.y)
+                    } else {
+                        look.background
+                    };
+                }
+            }
+            let (dx, dy) = ((x as f64 - m.cx) / w as f64, (y as f64 - m.cy) / h as f64);
+            let light = exposure.level * (1.0 - exposure.vignetting * 2.0 * (dx * dx + dy * dy));
+            lin[y * w + x] = light * acc / (n * n) as f64;
+        }
+    }
+    if exposure.blur_px > 0.0 {
+        lin = blur(&lin, w, h, exposure.blur_px);
+    }
+    let mut rng = SplitMix::new(seed ^ 0xB0A4_D000);
+    let mut img = Image::new(w as u32, h as u32, Encoding::Mono8);
+    for (o, v) in img.data.iter_mut().zip(&lin) {
+        *o = (v + exposure.noise_sigma * rng.normal()).round().clamp(0.0, 255.0) as u8;
+    }
+    img
+}
+
+fn blur(src: &[f64], w: usize, h: usize, sigma: f64) -> Vec<f64> {
+    let r = (3.0 * sigma).ceil() as isize;
+    let k: Vec<f64> = (-r..=r).map(|i| (-((i * i) as f64) / (2.0 * sigma * sigma)).exp()).collect();
+    let sum: f64 = k.iter().sum();
+    let pass = |src: &[f64], horizontal: bool| {
+        let mut out = vec![0.0; src.len()];
+        for y in 0..h as isize {
+            for x in 0..w as isize {
+                let mut acc = 0.0;
+                for (i, kv) in k.iter().enumerate() {
+                    let o = i as isize - r;
+                    let (xx, yy) = if horizontal {
+                        ((x + o).clamp(0, w as isize - 1), y)
+                    } else {
+                        (x, (y + o).clamp(0, h as isize - 1))
+                    };
+                    acc += kv * src[(yy * w as isize + xx) as usize];
+                }
+                out[(y * w as isize + x) as usize] = acc / sum;
+            }
+        }
+        out
+    };
+    pass(&pass(src, true), false)
+}
+
+/// The board's printed area (squares plus half the border) as four corners in the board frame.
+fn outline(spec: &BoardSpec, look: &BoardLook) -> [Vec3; 4] {
+    let s = spec.square_m;
+    let m = (1.0 + 0.5 * look.margin_squares) * s;
+    let (x1, y1) = ((spec.cols as f64 - 1.0) * s + m, (spec.rows as f64 - 1.0) * s + m);
+    [Vec3::new(-m, -m, 0.0), Vec3::new(x1, -m, 0.0), Vec3::new(x1, y1, 0.0), Vec3::new(-m, y1, 0.0)]
+}
+
+/// Whether the board's squares lie inside the image with `margin_px` to spare.
+pub fn board_in_view(model: &CameraModel, optical_from_board: &Iso3, spec: &BoardSpec, margin_px: f64) -> bool {
+    outline(spec, &BoardLook { margin_squares: 0.0, ..BoardLook::default() }).iter().all(|&p| {
+        model.project(optical_from_board.transform_point(p)).is_some_and(|(u, v)| {
+            u >= margin_px
+                && v >= margin_px
+                && u <= f64::from(model.width) - 1.0 - margin_px
+                && v <= f64::from(model.height) - 1.0 - margin_px
+        })
+    })
+}
+
+/// `count` varied board poses (`optical <- board`) for an intrinsics set: 0.45-0.85 m away,
+/// tilted 10-40 degrees, turned up to 20 degrees, spread over the image, every square in view.
+pub fn board_views(model: &CameraModel, spec: &BoardSpec, count: usize, seed: u64) -> Vec<Iso3> {
+    let mut rng = SplitMix::new(seed ^ 0x5EED_CA1B);
+    let centre = Vec3::new((spec.cols as f64 - 1.0) * 0.5 * spec.square_m, (spec.rows as f64 - 1.0) * 0.5 * spec.square_m, 0.0);
+    let mut out = Vec::new();
+    let mut tries = 0;
+    while out.len() < count && tries < 100_000 {
+        tries += 1;
+        let i = out.len();
+        let sign = |r: &mut SplitMix| if r.uniform() < 0.5 { -1.0 } else { 1.0 };
+        let tilt = (10.0 + 30.0 * rng.uniform()).to_radians() * sign(&mut rng);
+        let other = (20.0 * rng.uniform()).to_radians() * sign(&mut rng);
+        let (ax, ay) = if i % 2 == 0 { (tilt, other) } else { (other, tilt) };
+        let az = (40.0 * rng.uniform() - 20.0).to_radians();
+        let rotation = Mat3::rot_x(ax).mul_mat(&Mat3::rot_y(ay)).mul_mat(&Mat3::rot_z(az));
+        let dist = 0.45 + 0.4 * rng.uniform();
+        let (u, v) = (
+            f64::from(model.width) * (0.3 + 0.4 * rng.uniform()),
+            f64::from(model.height) * (0.3 + 0.4 * rng.uniform()),
+        );
+        let Some(ray) = model.ray(u, v) else { continue };
+        let translation = ray * dist - rotation.mul_vec(centre);
+        let pose = Iso3 { rotation, translation };
+        if board_in_view(model, &pose, spec, 6.0) {
+            out.push(pose);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::board::detect;
+    use crate::rig::Rig;
+
+    #[test]
+    fn rendered_board_is_found_where_it_projects() {
+        let model = Rig::study(640, 480).cameras[0].model().unwrap();
+        let spec = BoardSpec::parse("9x6", 0.03).unwrap();
+        let rays = RayTable::new(&model);
+        let mut worst = 0.0f64;
+        let mut sum2 = 0.0;
+        let mut n = 0;
+        for (i, pose) in board_views(&model, &spec, 6, 3).iter().enumerate() {
+            let img = render_board(&rays, pose, &spec, &BoardLook::default(), &Exposure::default(), i as u64);
+            let c = detect(&img.view().unwrap(), &spec).unwrap_or_else(|e| panic!("view {i}: {e}"));
+            for (k, p) in c.points.iter().enumerate() {
+                let (u, v) = model.project(pose.transform_point(spec.point(k))).unwrap();
+                let e = ((p[0] - u).powi(2) + (p[1] - v).powi(2)).sqrt();
+                worst = worst.max(e);
+                sum2 += e * e;
+                n += 1;
+            }
+        }
+        let rms = (sum2 / f64::from(n)).sqrt();
+        eprintln!("corner error rms {rms:.3} px, max {worst:.3} px over {n} corners");
+        assert!(rms < 0.08 && worst < 0.3, "rms {rms} max {worst}");
+    }
+}
