@@ -117,29 +117,37 @@ pub fn render_board(
     let origin = optical_from_board.translation;
     let board_from_optical = optical_from_board.inverse();
     let mut lin = vec![0.0f64; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let mut acc = 0.0;
-            for sy in 0..n {
-                for sx in 0..n {
-                    let u = x as f64 + (sx as f64 + 0.5) / n as f64 - 0.5;
-                    let v = y as f64 + (sy as f64 + 0.5) / n as f64 - 0.5;
-                    let d = rays.ray(u, v);
-                    let den = normal.dot(d);
-                    let t = if den.abs() > 1e-12 { normal.dot(origin) / den } else { -1.0 };
-                    acc += if t > 0.0 {
-                        let p = board_from_optical.transform_point(d * t);
-                        board_albedo(spec, look, p.x, p.y)
-                    } else {
-                        look.background
-                    };
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(8);
+    let rows_per = h.div_ceil(threads);
+    std::thread::scope(|scope| {
+        for (k, chunk) in lin.chunks_mut(rows_per * w).enumerate() {
+            let (board_from_optical, normal) = (&board_from_optical, normal);
+            scope.spawn(move || {
+                for (i, out) in chunk.iter_mut().enumerate() {
+                    let (x, y) = (i % w, k * rows_per + i / w);
+                    let mut acc = 0.0;
+                    for sy in 0..n {
+                        for sx in 0..n {
+                            let u = x as f64 + (sx as f64 + 0.5) / n as f64 - 0.5;
+                            let v = y as f64 + (sy as f64 + 0.5) / n as f64 - 0.5;
+                            let d = rays.ray(u, v);
+                            let den = normal.dot(d);
+                            let t = if den.abs() > 1e-12 { normal.dot(origin) / den } else { -1.0 };
+                            acc += if t > 0.0 {
+                                let p = board_from_optical.transform_point(d * t);
+                                board_albedo(spec, look, p.x, p.y)
+                            } else {
+                                look.background
+                            };
+                        }
+                    }
+                    let (dx, dy) = ((x as f64 - m.cx) / w as f64, (y as f64 - m.cy) / h as f64);
+                    let light = exposure.level * (1.0 - exposure.vignetting * 2.0 * (dx * dx + dy * dy));
+                    *out = light * acc / (n * n) as f64;
                 }
-            }
-            let (dx, dy) = ((x as f64 - m.cx) / w as f64, (y as f64 - m.cy) / h as f64);
-            let light = exposure.level * (1.0 - exposure.vignetting * 2.0 * (dx * dx + dy * dy));
-            lin[y * w + x] = light * acc / (n * n) as f64;
+            });
         }
-    }
+    });
     if exposure.blur_px > 0.0 {
         lin = blur(&lin, w, h, exposure.blur_px);
     }
