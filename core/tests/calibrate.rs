@@ -81,7 +81,7 @@ fn calibrate_all(truth: &Rig) -> Calibrated {
     let mut intrinsics_rms = Vec::new();
     for (ci, cam) in truth.cameras.iter().enumerate() {
         let model = cam.model().unwrap();
-        let views = intrinsics_views(&model, 15, 100 * ci as u64 + 7);
+        let views = intrinsics_views(&model, 20, 100 * ci as u64 + 7);
         let r = calibrate_intrinsics(&spec(), &views, model.width, model.height, &IntrinsicsConfig::default()).unwrap();
         intrinsics_rms.push(r.rms_px);
         let p = calibrate_placement(&spec(), &r.model, &placement_board(), &placement_views(cam, 50 + ci as u64)).unwrap();

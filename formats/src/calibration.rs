@@ -102,10 +102,40 @@ pub fn read(path: &Path) -> Result<CameraCalibration, CalibrationError> {
     Ok(c)
 }
 
-/// Writes a calibration file atomically.
+impl CameraCalibration {
+    /// The file's text, laid out as ROS 2's camera_calibration_parsers writes it (keys in its
+    /// order, matrices as `rows`, `cols` and a flow sequence `data`); every number keeps its full
+    /// precision and is written as a float.
+    pub fn to_yaml(&self) -> String {
+        let num = |v: f64| format!("{v:?}");
+        let matrix = |name: &str, m: &Matrix| {
+            let data: Vec<String> = m.data.iter().map(|&v| num(v)).collect();
+            format!("{name}:\n  rows: {}\n  cols: {}\n  data: [{}]\n", m.rows, m.cols, data.join(", "))
+        };
+        // The camera name is quoted only when YAML would read it as something else.
+        let name = if self.camera_name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            && self.camera_name.starts_with(|c: char| c.is_ascii_alphabetic())
+        {
+            self.camera_name.clone()
+        } else {
+            format!("{:?}", self.camera_name)
+        };
+        format!(
+            "image_width: {}\nimage_height: {}\ncamera_name: {name}\n{}distortion_model: {}\n{}{}{}",
+            self.image_width,
+            self.image_height,
+            matrix("camera_matrix", &self.camera_matrix),
+            self.distortion_model,
+            matrix("distortion_coefficients", &self.distortion_coefficients),
+            matrix("rectification_matrix", &self.rectification_matrix),
+            matrix("projection_matrix", &self.projection_matrix),
+        )
+    }
+}
+
+/// Writes a calibration file atomically (see [`CameraCalibration::to_yaml`]).
 pub fn write(path: &Path, c: &CameraCalibration) -> Result<(), crate::FileError> {
-    let text = serde_yaml::to_string(c).map_err(|e| crate::FileError::new(path, std::io::Error::other(e)))?;
-    crate::write_bytes_atomic(path, text.as_bytes())
+    crate::write_bytes_atomic(path, c.to_yaml().as_bytes())
 }
 
 #[cfg(test)]
@@ -125,6 +155,11 @@ mod tests {
         assert_eq!(CameraCalibration::from_model("narrow_stereo", &m), c);
         write(&dir.join("d.yaml"), &c).unwrap();
         assert_eq!(read(&dir.join("d.yaml")).unwrap(), c);
+        let written = std::fs::read_to_string(dir.join("d.yaml")).unwrap();
+        assert!(written.starts_with("image_width: 640\nimage_height: 480\ncamera_name: narrow_stereo\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: [700.1, 0.0, 322.4,"), "{written}");
+        let odd = CameraCalibration { camera_name: "cam 1: left".into(), ..c.clone() };
+        write(&dir.join("e.yaml"), &odd).unwrap();
+        assert_eq!(read(&dir.join("e.yaml")).unwrap(), odd);
         assert_eq!(url_path("file:///tmp/x.yaml").unwrap(), PathBuf::from("/tmp/x.yaml"));
         assert!(url_path("package://cam/x.yaml").is_err());
         std::fs::write(

@@ -13,6 +13,7 @@ pub mod dicom;
 pub mod frames;
 pub mod gltf;
 pub mod image;
+pub mod plot;
 pub mod ply;
 pub mod preview;
 pub mod scene;

@@ -2,10 +2,11 @@
 //!
 //! The nodes of the spec as transport-agnostic components ([`components`]), the conversions
 //! between messages and the algorithms ([`convert`]), the scanner's tf view ([`tf`]), the
-//! synthetic scan writer ([`synth`]), offline reconstruction from a bag ([`offline`]) and the
+//! synthetic scan writer ([`synth`]), the calibration commands ([`calibrate`]), offline reconstruction from a bag ([`offline`]) and the
 //! launcher of ROS 2 YAML launch files ([`launch`]).
 #![deny(missing_docs)]
 
+pub mod calibrate;
 pub mod components;
 pub mod convert;
 pub mod host;

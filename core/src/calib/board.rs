@@ -324,7 +324,12 @@ fn grow(pts: &[[f64; 2]], seed: usize) -> HashMap<Cell, usize> {
                 let Some(pc) = p(c) else { continue };
                 let mut preds = Vec::new();
                 if let Some(pb) = p((c.0 - d.0, c.1 - d.1)) {
-                    preds.push([2.0 * pc[0] - pb[0], 2.0 * pc[1] - pb[1]]);
+                    // Perspective shortens (or stretches) successive steps by about the same ratio.
+                    let ratio = match p((c.0 - 2 * d.0, c.1 - 2 * d.1)) {
+                        Some(pa) => (d2(pc, pb) / d2(pb, pa).max(1e-12)).sqrt().clamp(0.5, 2.0),
+                        None => 1.0,
+                    };
+                    preds.push([pc[0] + (pc[0] - pb[0]) * ratio, pc[1] + (pc[1] - pb[1]) * ratio]);
                 }
                 for e in [(d.1, d.0), (-d.1, -d.0)] {
                     if let (Some(ce), Some(te)) = (p((c.0 + e.0, c.1 + e.1)), p((t.0 + e.0, t.1 + e.1))) {
@@ -353,6 +358,26 @@ fn grow(pts: &[[f64; 2]], seed: usize) -> HashMap<Cell, usize> {
             return grid;
         }
     }
+}
+
+/// A lattice grown with a diagonal as one of its axes (strong foreshortening makes a diagonal
+/// the shorter step) is a sheared rectangle: undo the shear that makes it full.
+fn unshear(grid: HashMap<Cell, usize>) -> HashMap<Cell, usize> {
+    if extent(&grid).4 {
+        return grid;
+    }
+    for k in [-1, 1, -2, 2] {
+        for along_i in [true, false] {
+            let sheared: HashMap<Cell, usize> = grid
+                .iter()
+                .map(|(&(i, j), &v)| if along_i { ((i + k * j, j), v) } else { ((i, j + k * i), v) })
+                .collect();
+            if extent(&sheared).4 {
+                return sheared;
+            }
+        }
+    }
+    grid
 }
 
 /// Extent (columns, rows) of a lattice and whether it is a full rectangle.
@@ -431,7 +456,7 @@ pub fn detect(view: &ImageView<'_>, spec: &BoardSpec) -> Result<Corners, BoardEr
     });
     let mut best: HashMap<Cell, usize> = HashMap::new();
     for &seed in order.iter().take(12) {
-        let grid = grow(&pts, seed);
+        let grid = unshear(grow(&pts, seed));
         let (_, _, ci, cj, full) = extent(&grid);
         let fits = full && ((ci as usize, cj as usize) == (spec.cols, spec.rows) || (ci as usize, cj as usize) == (spec.rows, spec.cols));
         if fits {

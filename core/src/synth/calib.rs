@@ -216,15 +216,15 @@ pub fn board_views(model: &CameraModel, spec: &BoardSpec, count: usize, seed: u6
         tries += 1;
         let i = out.len();
         let sign = |r: &mut SplitMix| if r.uniform() < 0.5 { -1.0 } else { 1.0 };
-        let tilt = (10.0 + 30.0 * rng.uniform()).to_radians() * sign(&mut rng);
+        let tilt = (20.0 + 25.0 * rng.uniform()).to_radians() * sign(&mut rng);
         let other = (20.0 * rng.uniform()).to_radians() * sign(&mut rng);
         let (ax, ay) = if i % 2 == 0 { (tilt, other) } else { (other, tilt) };
         let az = (40.0 * rng.uniform() - 20.0).to_radians();
         let rotation = Mat3::rot_x(ax).mul_mat(&Mat3::rot_y(ay)).mul_mat(&Mat3::rot_z(az));
-        let dist = 0.45 + 0.4 * rng.uniform();
+        let dist = 0.35 + 0.3 * rng.uniform();
         let (u, v) = (
-            f64::from(model.width) * (0.3 + 0.4 * rng.uniform()),
-            f64::from(model.height) * (0.3 + 0.4 * rng.uniform()),
+            f64::from(model.width) * (0.2 + 0.6 * rng.uniform()),
+            f64::from(model.height) * (0.2 + 0.6 * rng.uniform()),
         );
         let Some(ray) = model.ray(u, v) else { continue };
         let translation = ray * dist - rotation.mul_vec(centre);

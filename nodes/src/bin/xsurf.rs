@@ -8,6 +8,7 @@
 //! xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--duration S]
 //! xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
 //! xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
+//! xsurf calibrate synth|intrinsics|placement|laser ...
 //! xsurf compose /NS/NODE_TYPE... [--ros-args ...]
 //! ```
 //! Only `bag record`, `bag play`, `param` and `compose` open a DDS participant.
@@ -37,6 +38,18 @@ const USAGE: &str = "usage:
       publish a bag over DDS with its original timing (honours ROS_DOMAIN_ID, ROS_LOCALHOST_ONLY)
   xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
       a node's parameters through the standard ROS 2 parameter services (like `ros2 param`)
+  xsurf calibrate synth DIR [--size WxH] [--board COLSxROWS] [--square M] [--views N] [--noise S] [--seed N]
+      render a calibration set with known truth (board views, board on the tabletop, laser at 3 heights)
+      and DIR/calibrate.sh, the commands below that calibrate from it
+  xsurf calibrate intrinsics IMAGE... --board COLSxROWS --square M -o CAMERA.yaml [--name N]
+        [--model plumb_bob|rational_polynomial] [--report DIR]
+      checkerboard views -> camera_calibration YAML (camera_info_url); per-image errors, outliers rejected
+  xsurf calibrate placement [--rig RIG] -o RIG --board COLSxROWS --square M --board-origin X,Y[,Z] [--board-yaw DEG]
+        (--camera NAME --intrinsics CAMERA.yaml --travels T[,T...] IMAGE...)... [--report DIR]
+      the board flat on the tabletop (corner 0 at X,Y in `table`) -> carm -> <cam>_optical_frame in the rig
+  xsurf calibrate laser --rig RIG [-o RIG] (--camera NAME --heights H[,H...] IMAGE...)... [--report DIR]
+      the laser line on the tabletop at two or more heights -> laser_plane in the rig
+      (every calibrate command writes report.json and PNG plots to DIR, default <output>_<command>_report/)
   xsurf compose /NS/NODE_TYPE... | /NS/NAME=NODE_TYPE... [--ros-args ...]
       run several nodes in one process, connected in memory, every topic still on DDS
   xsurf launch FILE [--composed] [NAME:=VALUE...]
@@ -419,6 +432,7 @@ fn main() -> ExitCode {
         Some("reconstruct") => cmd_reconstruct(&args[1..]),
         Some("bag") => cmd_bag(&args[1..]),
         Some("param") => xsurf_nodes::param_client::run(&args[1..]),
+        Some("calibrate") => xsurf_nodes::calibrate::run(&args[1..]),
         Some("-h" | "--help" | "help") => {
             println!("{USAGE}");
             Ok(())
@@ -431,6 +445,9 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("xsurf: error: {e:#}");
             if e.downcast_ref::<UsageError>().is_some() {
+                ExitCode::from(2)
+            } else if e.downcast_ref::<xsurf_nodes::calibrate::UsageError>().is_some() {
+                eprintln!("{USAGE}");
                 ExitCode::from(2)
             } else if e.downcast_ref::<Incomplete>().is_some() {
                 ExitCode::from(3)

@@ -1,0 +1,603 @@
+//! `xsurf calibrate`: the technician's calibration commands (offline; no DDS participant).
+//!
+//! ```text
+//! xsurf calibrate synth DIR [--size WxH] [--board COLSxROWS] [--square M] [--views N] [--noise S] [--seed N]
+//! xsurf calibrate intrinsics IMAGE... --board COLSxROWS --square M -o CAMERA.yaml [--name NAME]
+//!       [--model plumb_bob|rational_polynomial] [--report DIR]
+//! xsurf calibrate placement [--rig RIG.yaml] -o RIG.yaml --board COLSxROWS --square M --board-origin X,Y[,Z]
+//!       [--board-yaw DEG] (--camera NAME --intrinsics CAMERA.yaml --travels T[,T...] IMAGE...)... [--report DIR]
+//! xsurf calibrate laser --rig RIG.yaml [-o RIG.yaml] (--camera NAME --heights H[,H...] IMAGE...)... [--report DIR]
+//! ```
+//! Each command prints its numbers, writes a report (`report.json` and PNG plots; by default in
+//! `<output>_<command>_report/`) and explains every image it could not use.
+
+use anyhow::{anyhow, bail, Context};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use xsurf_core::calib::board::{detect, BoardSpec, Corners};
+use xsurf_core::calib::intrinsics::{self, DistortionModel, IntrinsicsConfig};
+use xsurf_core::calib::laser::{self, LaserView};
+use xsurf_core::calib::placement::{self, table_from_board, PlacementView};
+use xsurf_core::camera::CameraModel;
+use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine};
+use xsurf_core::geom::Vec3;
+use xsurf_core::pose::table_from_carm;
+use xsurf_core::rig::{Rig, RigCamera};
+use xsurf_core::synth::calib::{board_views, render_board, BoardLook, Exposure, RayTable};
+use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene};
+use xsurf_formats::calibration::{self, CameraCalibration};
+use xsurf_formats::plot::{palette, Plot, BLUE, GREY, RED};
+use xsurf_formats::write_bytes_atomic;
+
+/// A command-line mistake (the caller exits 2).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);
+
+fn usage(msg: impl Into<String>) -> anyhow::Error {
+    anyhow!(UsageError(msg.into()))
+}
+
+/// Travels at which the synthetic set images the board on the tabletop, metres.
+pub const SYNTH_TRAVELS: [f64; 3] = [-0.03, 0.0, 0.03];
+/// Tabletop heights of the synthetic laser set, metres.
+pub const SYNTH_HEIGHTS: [f64; 3] = [0.0, 0.12, 0.24];
+
+/// Images that share a camera and its per-image values.
+#[derive(Debug, Default)]
+struct Group {
+    camera: String,
+    intrinsics: Option<PathBuf>,
+    values: Vec<f64>,
+    images: Vec<PathBuf>,
+}
+
+/// Options: `--name value` pairs, and groups opened by `--camera`.
+#[derive(Debug, Default)]
+struct Opts {
+    single: Vec<(String, String)>,
+    positional: Vec<PathBuf>,
+    groups: Vec<Group>,
+}
+
+impl Opts {
+    fn parse(args: &[String], valued: &[&str], values_flag: Option<&str>) -> anyhow::Result<Opts> {
+        let mut o = Opts::default();
+        let mut i = 0;
+        while i < args.len() {
+            let a = args[i].as_str();
+            let value = || args.get(i + 1).cloned().ok_or_else(|| usage(format!("{a} needs a value")));
+            match a {
+                "--camera" => o.groups.push(Group { camera: value()?, ..Group::default() }),
+                "--intrinsics" | "--travels" | "--heights" => {
+                    let v = value()?;
+                    let g = o.groups.last_mut().ok_or_else(|| usage(format!("{a} belongs after --camera NAME")))?;
+                    if a == "--intrinsics" {
+                        g.intrinsics = Some(PathBuf::from(v));
+                    } else if Some(a) == values_flag {
+                        g.values = list(a, &v)?;
+                    } else {
+                        return Err(usage(format!("unknown option {a}")));
+                    }
+                }
+                _ if valued.contains(&a) => o.single.push((a.to_string(), value()?)),
+                _ if a.starts_with('-') && a.len() > 1 => return Err(usage(format!("unknown option {a}"))),
+                _ => {
+                    match o.groups.last_mut() {
+                        Some(g) => g.images.push(PathBuf::from(a)),
+                        None => o.positional.push(PathBuf::from(a)),
+                    }
+                    i += 1;
+                    continue;
+                }
+            }
+            i += 2;
+        }
+        Ok(o)
+    }
+    fn get(&self, name: &str) -> Option<&str> {
+        self.single.iter().rev().find(|(k, _)| k == name).map(|(_, v)| v.as_str())
+    }
+    fn need(&self, name: &str) -> anyhow::Result<&str> {
+        self.get(name).ok_or_else(|| usage(format!("{name} is required")))
+    }
+    fn num(&self, name: &str, default: f64) -> anyhow::Result<f64> {
+        match self.get(name) {
+            None => Ok(default),
+            Some(v) => v.parse().map_err(|_| usage(format!("{name}: {v:?} is not a number"))),
+        }
+    }
+    fn board(&self) -> anyhow::Result<BoardSpec> {
+        let square = self.need("--square")?;
+        let square: f64 = square.parse().map_err(|_| usage(format!("--square: {square:?} is not a number (metres)")))?;
+        BoardSpec::parse(self.need("--board")?, square).map_err(|e| usage(format!("--board/--square: {e}")))
+    }
+}
+
+fn list(name: &str, v: &str) -> anyhow::Result<Vec<f64>> {
+    v.split(',')
+        .map(|s| s.trim().parse::<f64>().map_err(|_| usage(format!("{name}: {s:?} in {v:?} is not a number"))))
+        .collect()
+}
+
+/// Runs `xsurf calibrate ARGS`.
+pub fn run(args: &[String]) -> anyhow::Result<()> {
+    let rest = args.get(1..).unwrap_or(&[]);
+    match args.first().map(String::as_str) {
+        Some("synth") => synth(rest),
+        Some("intrinsics") => cmd_intrinsics(rest),
+        Some("placement") => cmd_placement(rest),
+        Some("laser") => cmd_laser(rest),
+        Some(other) => Err(usage(format!("unknown calibrate command {other:?} (synth, intrinsics, placement, laser)"))),
+        None => Err(usage("calibrate needs a command (synth, intrinsics, placement, laser)")),
+    }
+}
+
+fn report_dir(o: &Opts, out: &Path, kind: &str) -> PathBuf {
+    match o.get("--report") {
+        Some(d) => PathBuf::from(d),
+        None => {
+            let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "calibration".into());
+            out.with_file_name(format!("{stem}_{kind}_report"))
+        }
+    }
+}
+
+fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(v)?;
+    write_bytes_atomic(path, text.as_bytes())?;
+    Ok(())
+}
+
+fn find_board(path: &Path, spec: &BoardSpec) -> Result<(Corners, (u32, u32)), String> {
+    let img = xsurf_formats::frames::read_frame(path).map_err(|e| e.to_string())?;
+    let view = img.view().map_err(|e| e.to_string())?;
+    let c = detect(&view, spec).map_err(|e| e.to_string())?;
+    Ok((c, (img.width, img.height)))
+}
+
+fn read_rig(path: &Path) -> anyhow::Result<Rig> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("rig file {}", path.display()))?;
+    serde_yaml::from_str(&text).with_context(|| format!("rig file {}", path.display()))
+}
+
+/// Writes a rig file atomically, with a header saying what it is.
+pub fn write_rig(path: &Path, rig: &Rig, header: &str) -> anyhow::Result<()> {
+    let body = serde_yaml::to_string(rig)?;
+    let comments: String = header.lines().map(|l| format!("# {l}\n")).collect();
+    write_bytes_atomic(path, format!("{comments}{body}").as_bytes())?;
+    Ok(())
+}
+
+fn cmd_intrinsics(args: &[String]) -> anyhow::Result<()> {
+    let o = Opts::parse(args, &["--board", "--square", "-o", "--out", "--name", "--model", "--report"], None)?;
+    let spec = o.board()?;
+    let out = PathBuf::from(o.get("-o").or(o.get("--out")).ok_or_else(|| usage("-o CAMERA.yaml is required"))?);
+    let model = match o.get("--model").unwrap_or("plumb_bob") {
+        m => DistortionModel::parse(m)
+            .ok_or_else(|| usage(format!("--model {m}: expected plumb_bob or rational_polynomial")))?,
+    };
+    let name = o.get("--name").map(str::to_string).unwrap_or_else(|| {
+        out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "camera".into())
+    });
+    if o.positional.is_empty() {
+        return Err(usage("name the board images"));
+    }
+    let mut found = Vec::new();
+    let mut status: Vec<(PathBuf, Option<usize>, Option<String>)> = Vec::new();
+    let mut size = None;
+    for path in &o.positional {
+        match find_board(path, &spec) {
+            Ok((c, s)) if size.is_none_or(|z| z == s) => {
+                size = Some(s);
+                status.push((path.clone(), Some(found.len()), None));
+                found.push(c.points);
+            }
+            Ok((_, s)) => {
+                let want = size.unwrap_or(s);
+                status.push((path.clone(), None, Some(format!("image is {}x{}, the others {}x{}", s.0, s.1, want.0, want.1))))
+            }
+            Err(e) => status.push((path.clone(), None, Some(e))),
+        }
+    }
+    for (p, _, why) in &status {
+        if let Some(why) = why {
+            println!("{}: not used: {why}", p.display());
+        }
+    }
+    let reasons: String = status
+        .iter()
+        .filter_map(|(p, _, w)| w.as_ref().map(|w| format!("\n  {}: {w}", p.display())))
+        .collect();
+    let Some((w, h)) = size else {
+        bail!("intrinsics: no image shows the {}x{} board{reasons}", spec.cols, spec.rows);
+    };
+    let cfg = IntrinsicsConfig { model, ..IntrinsicsConfig::default() };
+    let r = intrinsics::calibrate(&spec, &found, w, h, &cfg).map_err(|e| anyhow!("intrinsics: {e}{reasons}"))?;
+    let m = &r.model;
+    println!(
+        "{name}: {w}x{h}, fx {:.2} fy {:.2} cx {:.2} cy {:.2} (1-sigma {:.2} {:.2} {:.2} {:.2} px), {} d {:?}",
+        m.fx,
+        m.fy,
+        m.cx,
+        m.cy,
+        r.std_devs.first().copied().unwrap_or(f64::NAN),
+        r.std_devs.get(1).copied().unwrap_or(f64::NAN),
+        r.std_devs.get(2).copied().unwrap_or(f64::NAN),
+        r.std_devs.get(3).copied().unwrap_or(f64::NAN),
+        m.distortion.to_ros().0,
+        m.distortion.to_ros().1
+    );
+    let mut images = Vec::new();
+    for (p, idx, why) in &status {
+        let entry = match idx {
+            Some(i) => {
+                let v = &r.views[*i];
+                println!(
+                    "  {}: reprojection RMS {:.3} px{}",
+                    p.display(),
+                    v.rms_px,
+                    v.rejected.as_ref().map(|s| format!(", rejected: {s}")).unwrap_or_default()
+                );
+                json!({"file": p, "status": if v.rejected.is_some() {"rejected"} else {"used"},
+                       "reason": v.rejected, "rms_px": v.rms_px, "residuals_px": v.residuals,
+                       "corners_px": found[*i]})
+            }
+            None => json!({"file": p, "status": "board not found", "reason": why}),
+        };
+        images.push(entry);
+    }
+    let used = r.views.iter().filter(|v| v.rejected.is_none()).count();
+    println!("reprojection RMS {:.3} px over {used} images; written {}", r.rms_px, out.display());
+    calibration::write(&out, &CameraCalibration::from_model(&name, m))?;
+
+    let dir = report_dir(&o, &out, "intrinsics");
+    std::fs::create_dir_all(&dir).with_context(|| format!("report folder {}", dir.display()))?;
+    write_json(
+        &dir.join("report.json"),
+        &json!({"kind": "intrinsics", "camera_name": name, "board": {"cols": spec.cols, "rows": spec.rows, "square_m": spec.square_m},
+                "width": w, "height": h, "fx": m.fx, "fy": m.fy, "cx": m.cx, "cy": m.cy,
+                "distortion_model": m.distortion.to_ros().0, "d": m.distortion.to_ros().1,
+                "std_devs": r.std_devs, "rms_px": r.rms_px, "iterations": r.report.iterations, "images": images}),
+    )?;
+    // Per image RMS.
+    let n = status.len();
+    let top = r.views.iter().map(|v| v.rms_px).fold(0.1f64, f64::max) * 1.1;
+    let mut bars = Plot::new("REPROJECTION RMS PER IMAGE", "IMAGE", "PX", (-0.5, n as f64 - 0.5), (0.0, top));
+    for (k, (_, idx, _)) in status.iter().enumerate() {
+        match idx {
+            Some(i) => {
+                let v = &r.views[*i];
+                bars.bar(k as f64, 0.8, v.rms_px, if v.rejected.is_some() { RED } else { BLUE });
+            }
+            None => bars.bar(k as f64, 0.8, top, GREY),
+        }
+    }
+    bars.legend(0, "USED", BLUE);
+    bars.legend(1, "REJECTED", RED);
+    bars.legend(2, "NO BOARD", GREY);
+    bars.write_png(&dir.join("rms_per_image.png"))?;
+    // Residual vectors.
+    let lim = r
+        .views
+        .iter()
+        .filter(|v| v.rejected.is_none())
+        .flat_map(|v| v.residuals.iter().map(|d| d[0].abs().max(d[1].abs())))
+        .fold(0.2f64, f64::max)
+        * 1.1;
+    let mut sc = Plot::new("RESIDUALS (CIRCLE 0.2 PX)", "DU PX", "DV PX", (-lim, lim), (-lim, lim));
+    sc.circle(0.0, 0.0, 0.2, GREY);
+    for (i, v) in r.views.iter().enumerate().filter(|(_, v)| v.rejected.is_none()) {
+        for d in &v.residuals {
+            sc.dot(d[0], d[1], 1, palette(i));
+        }
+    }
+    sc.write_png(&dir.join("residuals.png"))?;
+    // Where the corners fell on the sensor: gaps mean distortion is not pinned there.
+    let mut cov = Plot::new("CORNERS ON THE SENSOR", "U PX", "V PX (DOWN)", (0.0, f64::from(w)), (-f64::from(h), 0.0));
+    for (i, pts) in found.iter().enumerate() {
+        for p in pts {
+            cov.dot(p[0], -p[1], 1, palette(i));
+        }
+    }
+    cov.write_png(&dir.join("coverage.png"))?;
+    println!("report: {}", dir.display());
+    Ok(())
+}
+
+fn per_image_values(g: &Group, flag: &str) -> anyhow::Result<Vec<f64>> {
+    match g.values.len() {
+        0 => Err(usage(format!("--camera {}: {flag} is required", g.camera))),
+        1 => Ok(vec![g.values[0]; g.images.len()]),
+        n if n == g.images.len() => Ok(g.values.clone()),
+        n => Err(usage(format!("--camera {}: {flag} has {n} values for {} images", g.camera, g.images.len()))),
+    }
+}
+
+fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
+    let o = Opts::parse(
+        args,
+        &["--board", "--square", "-o", "--out", "--rig", "--board-origin", "--board-yaw", "--report"],
+        Some("--travels"),
+    )?;
+    let spec = o.board()?;
+    let origin = list("--board-origin", o.need("--board-origin")?)?;
+    let origin = match origin[..] {
+        [x, y] => Vec3::new(x, y, 0.0),
+        [x, y, z] => Vec3::new(x, y, z),
+        _ => return Err(usage("--board-origin: expected X,Y or X,Y,Z (metres, table frame)")),
+    };
+    let board = table_from_board(origin, o.num("--board-yaw", 0.0)?.to_radians());
+    if !spec.origin_unique() {
+        return Err(usage(format!(
+            "--board {}x{}: the board's corner 0 is ambiguous (a 180-degree turn looks the same); use a board with one odd and one even count of inner corners, such as 9x6",
+            spec.cols, spec.rows
+        )));
+    }
+    let mut rig = match o.get("--rig") {
+        Some(p) => read_rig(Path::new(p))?,
+        None => {
+            let r = Rig::study(640, 480);
+            println!("no --rig: starting a new rig (laser_plane {:?}, laser_source {:?} until calibrated)", r.laser_plane, r.laser_source);
+            Rig { cameras: Vec::new(), ..r }
+        }
+    };
+    let out = PathBuf::from(
+        o.get("-o").or(o.get("--out")).or(o.get("--rig")).ok_or_else(|| usage("-o RIG.yaml is required"))?,
+    );
+    if o.groups.is_empty() {
+        return Err(usage("give at least one --camera NAME --intrinsics FILE --travels T IMAGE..."));
+    }
+    let dir = report_dir(&o, &out, "placement");
+    std::fs::create_dir_all(&dir).with_context(|| format!("report folder {}", dir.display()))?;
+    let mut report = Vec::new();
+    for (gi, g) in o.groups.iter().enumerate() {
+        let ipath = g.intrinsics.as_ref().ok_or_else(|| usage(format!("--camera {}: --intrinsics is required", g.camera)))?;
+        let model: CameraModel = calibration::read(ipath)?.model().map_err(|e| anyhow!("{}: {e}", ipath.display()))?;
+        let travels = per_image_values(g, "--travels")?;
+        let mut views = Vec::new();
+        let mut files = Vec::new();
+        let mut reasons = String::new();
+        for (p, &t) in g.images.iter().zip(&travels) {
+            match find_board(p, &spec) {
+                Ok((c, s)) if s == (model.width, model.height) => {
+                    views.push(PlacementView { corners: c.points, table_from_carm: table_from_carm(t, 0.0, 0.0) });
+                    files.push((p.clone(), t));
+                }
+                Ok((_, s)) => reasons.push_str(&format!(
+                    "\n  {}: image is {}x{}, the intrinsics {}x{}",
+                    p.display(),
+                    s.0,
+                    s.1,
+                    model.width,
+                    model.height
+                )),
+                Err(e) => reasons.push_str(&format!("\n  {}: {e}", p.display())),
+            }
+        }
+        if !reasons.is_empty() {
+            println!("{}: images not used:{reasons}", g.camera);
+        }
+        let r = placement::calibrate(&spec, &model, &board, &views)
+            .map_err(|e| anyhow!("placement of {}: {e}{reasons}", g.camera))?;
+        let t = r.carm_from_optical.translation;
+        let q = r.carm_from_optical.quaternion();
+        println!(
+            "{}: carm -> {}_optical_frame translation [{:.4}, {:.4}, {:.4}] m, rotation [{:.5}, {:.5}, {:.5}, {:.5}]; reprojection RMS {:.3} px over {} images",
+            g.camera, g.camera, t.x, t.y, t.z, q.x, q.y, q.z, q.w, r.rms_px, views.len()
+        );
+        let cam = RigCamera::from_parts(&g.camera, &model, &r.carm_from_optical);
+        match rig.cameras.iter_mut().find(|c| c.name == g.camera) {
+            Some(c) => *c = cam,
+            None => rig.cameras.push(cam),
+        }
+        let images: Vec<_> = files
+            .iter()
+            .zip(r.view_rms_px.iter().zip(&r.residuals))
+            .map(|((p, t), (rms, res))| json!({"file": p, "travel_m": t, "rms_px": rms, "residuals_px": res}))
+            .collect();
+        report.push(json!({"camera": g.camera, "intrinsics": ipath, "translation_m": [t.x, t.y, t.z],
+                           "rotation_xyzw": [q.x, q.y, q.z, q.w], "rms_px": r.rms_px, "images": images}));
+        let lim = r.residuals.iter().flatten().map(|d| d[0].abs().max(d[1].abs())).fold(0.2f64, f64::max) * 1.1;
+        let mut sc = Plot::new(&format!("{} PLACEMENT RESIDUALS", g.camera), "DU PX", "DV PX", (-lim, lim), (-lim, lim));
+        sc.circle(0.0, 0.0, 0.2, GREY);
+        for (i, res) in r.residuals.iter().enumerate() {
+            for d in res {
+                sc.dot(d[0], d[1], 1, palette(i + gi));
+            }
+        }
+        sc.write_png(&dir.join(format!("{}_residuals.png", g.camera)))?;
+    }
+    write_rig(&out, &rig, "xsurf rig file (see launch-config/rig_study.yaml); placement by `xsurf calibrate placement`")?;
+    write_json(
+        &dir.join("report.json"),
+        &json!({"kind": "placement", "board_origin_m": [origin.x, origin.y, origin.z], "cameras": report}),
+    )?;
+    println!("written {}; report: {}", out.display(), dir.display());
+    Ok(())
+}
+
+/// The laser line's centre pixels in an image (the edge detector's defaults).
+fn line_pixels(path: &Path) -> Result<(Vec<[f64; 2]>, (u32, u32)), String> {
+    let img = xsurf_formats::frames::read_frame(path).map_err(|e| e.to_string())?;
+    let view = img.view().map_err(|e| e.to_string())?;
+    let mut det = EdgeDetector::new(EdgeConfig::default()).map_err(|e| e.to_string())?;
+    let mut line = LaserLine::default();
+    det.detect(&view, &mut line).map_err(|e| e.to_string())?;
+    let px: Vec<[f64; 2]> = line
+        .u
+        .iter()
+        .zip(&line.v)
+        .filter(|(u, v)| u.is_finite() && v.is_finite())
+        .map(|(&u, &v)| [f64::from(u), f64::from(v)])
+        .collect();
+    Ok((px, (img.width, img.height)))
+}
+
+fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
+    let o = Opts::parse(args, &["-o", "--out", "--rig", "--report"], Some("--heights"))?;
+    let rig_path = PathBuf::from(o.need("--rig")?);
+    let mut rig = read_rig(&rig_path)?;
+    let out = PathBuf::from(o.get("-o").or(o.get("--out")).unwrap_or(o.need("--rig")?));
+    if o.groups.is_empty() {
+        return Err(usage("give at least one --camera NAME --heights H[,H...] IMAGE..."));
+    }
+    let mut views = Vec::new();
+    let mut files = Vec::new();
+    for g in &o.groups {
+        let cam = rig
+            .camera(&g.camera)
+            .ok_or_else(|| anyhow!("rig file {}: no camera {:?}; run `xsurf calibrate placement` first", rig_path.display(), g.camera))?;
+        let geometry = cam.geometry().map_err(|e| anyhow!("rig file {}: camera {}: {e}", rig_path.display(), g.camera))?;
+        let heights = per_image_values(g, "--heights")?;
+        for (p, &h) in g.images.iter().zip(&heights) {
+            let (pixels, size) = line_pixels(p).map_err(|e| anyhow!("{}: {e}", p.display()))?;
+            if size != (cam.width, cam.height) {
+                bail!("{}: image is {}x{}, camera {} is {}x{}", p.display(), size.0, size.1, g.camera, cam.width, cam.height);
+            }
+            views.push(LaserView { camera: geometry.clone(), height_m: h, pixels });
+            files.push((p.clone(), g.camera.clone(), h));
+        }
+    }
+    let reference = Vec3::new(rig.laser_plane[0], rig.laser_plane[1], rig.laser_plane[2]);
+    let r = laser::calibrate(&views, reference).map_err(|e| {
+        // Name the files behind "view N".
+        let mut msg = format!("laser plane: {e}");
+        for (i, (p, c, h)) in files.iter().enumerate() {
+            msg = msg.replace(&format!("view {i}:"), &format!("{} ({c}, height {h} m):", p.display()));
+        }
+        anyhow!(msg)
+    })?;
+    let old = rig.laser_plane;
+    rig.laser_plane = r.plane.to_params();
+    let p = rig.laser_plane;
+    println!(
+        "laser_plane [{:.6}, {:.6}, {:.6}, {:.6}] (was {old:?}); RMS {:.3} mm, max {:.3} mm over {} points ({} dropped)",
+        p[0],
+        p[1],
+        p[2],
+        p[3],
+        r.rms_m * 1e3,
+        r.max_m * 1e3,
+        r.used,
+        r.dropped
+    );
+    let dir = report_dir(&o, &out, "laser");
+    std::fs::create_dir_all(&dir).with_context(|| format!("report folder {}", dir.display()))?;
+    let mut images = Vec::new();
+    let lim = r.max_m.max(1e-4) * 1.2e3;
+    let rows = views.iter().flat_map(|v| v.pixels.iter().map(|p| p[1])).fold(1.0f64, f64::max);
+    let mut plot = Plot::new("LASER PLANE RESIDUALS", "IMAGE ROW PX", "MM", (0.0, rows), (-lim, lim));
+    plot.hline(0.0, GREY);
+    for (i, ((f, c, h), (v, res))) in files.iter().zip(views.iter().zip(&r.residuals)).enumerate() {
+        let ok: Vec<f64> = res.iter().copied().filter(|d| d.is_finite()).collect();
+        let rms = (ok.iter().map(|d| d * d).sum::<f64>() / ok.len().max(1) as f64).sqrt();
+        println!("  {} ({c}, height {h} m): {} points, RMS {:.3} mm", f.display(), ok.len(), rms * 1e3);
+        images.push(json!({"file": f, "camera": c, "height_m": h, "points": ok.len(), "rms_m": rms,
+                           "pixels": v.pixels, "residuals_m": res}));
+        for (px, d) in v.pixels.iter().zip(res) {
+            plot.dot(px[1], d * 1e3, 1, palette(i));
+        }
+        if i < 12 {
+            plot.legend(i, &format!("{c} H {h:.3}"), palette(i));
+        }
+    }
+    plot.write_png(&dir.join("residuals.png"))?;
+    write_rig(&out, &rig, "xsurf rig file (see launch-config/rig_study.yaml); laser_plane by `xsurf calibrate laser`")?;
+    write_json(
+        &dir.join("report.json"),
+        &json!({"kind": "laser", "laser_plane": rig.laser_plane, "rms_m": r.rms_m, "max_m": r.max_m,
+                "used": r.used, "dropped": r.dropped, "images": images}),
+    )?;
+    println!("written {}; report: {}", out.display(), dir.display());
+    Ok(())
+}
+
+/// `xsurf calibrate synth DIR`: a calibration set rendered from the study's rig, with the
+/// true rig and the commands that calibrate from it.
+fn synth(args: &[String]) -> anyhow::Result<()> {
+    let o = Opts::parse(args, &["--size", "--board", "--square", "--views", "--noise", "--seed"], None)?;
+    let [dir] = &o.positional[..] else { return Err(usage("calibrate synth needs one output folder")) };
+    let (w, h) = match o.get("--size").unwrap_or("640x480").split_once('x') {
+        Some((a, b)) => (
+            a.parse::<u32>().map_err(|_| usage("--size: bad width"))?,
+            b.parse::<u32>().map_err(|_| usage("--size: bad height"))?,
+        ),
+        None => return Err(usage("--size: expected WxH")),
+    };
+    if !(160..=4096).contains(&w) || !(120..=4096).contains(&h) {
+        return Err(usage("--size: width in 160..=4096, height in 120..=4096"));
+    }
+    let board = o.get("--board").unwrap_or("9x6");
+    let square = o.num("--square", 0.02765)?;
+    let spec = BoardSpec::parse(board, square).map_err(|e| usage(format!("--board/--square: {e}")))?;
+    let count = o.num("--views", 20.0)? as usize;
+    let noise = o.num("--noise", 2.0)?;
+    let seed = o.num("--seed", 1.0)? as u64;
+    let truth = Rig::study(w, h);
+    let exposure = Exposure { noise_sigma: noise, ..Exposure::default() };
+    let png = |path: &Path, img: &xsurf_core::image::Image| {
+        xsurf_formats::image::write_png(path, img.width, img.height, xsurf_formats::image::PngKind::Grey8, &img.data)
+    };
+    for sub in ["intrinsics", "placement", "laser"] {
+        std::fs::create_dir_all(dir.join(sub)).with_context(|| format!("{}", dir.join(sub).display()))?;
+    }
+    write_rig(&dir.join("truth_rig.yaml"), &truth, "the true rig the calibration set was rendered with")?;
+    // The placement board: centred under the C-arm at travel 0.
+    let origin = Vec3::new(-(spec.cols as f64 - 1.0) * 0.5 * square, (spec.rows as f64 - 1.0) * 0.5 * square, 0.0);
+    let board_pose = table_from_board(origin, 0.0);
+    let mut script = format!(
+        "#!/usr/bin/env bash\n# Calibrates the rig from this set (written by `xsurf calibrate synth`); compare rig.yaml with truth_rig.yaml.\nset -euo pipefail\ncd \"$(dirname \"$0\")\"\nB=\"--board {}x{} --square {square}\"\n",
+        spec.cols, spec.rows
+    );
+    let mut placement_args = format!(
+        "xsurf calibrate placement $B --board-origin {},{},0 -o rig.yaml",
+        origin.x, origin.y
+    );
+    let mut laser_args = String::from("xsurf calibrate laser --rig rig.yaml");
+    for (ci, cam) in truth.cameras.iter().enumerate() {
+        let model = cam.model()?;
+        let rays = RayTable::new(&model);
+        let poses = board_views(&model, &spec, count, seed + 1000 * ci as u64);
+        for (i, pose) in poses.iter().enumerate() {
+            let img = render_board(&rays, pose, &spec, &BoardLook::default(), &exposure, seed ^ ((ci * 100 + i) as u64));
+            png(&dir.join(format!("intrinsics/{}_{i:02}.png", cam.name)), &img)?;
+        }
+        script.push_str(&format!("xsurf calibrate intrinsics $B -o {0}.yaml intrinsics/{0}_*.png\n", cam.name));
+        let look = BoardLook { background: 0.85, ..BoardLook::default() };
+        let mut names = Vec::new();
+        for (i, &t) in SYNTH_TRAVELS.iter().enumerate() {
+            let pose = table_from_carm(t, 0.0, 0.0).compose(&cam.carm_from_optical()).inverse().compose(&board_pose);
+            let img = render_board(&rays, &pose, &spec, &look, &exposure, seed ^ ((ci * 100 + 50 + i) as u64));
+            let name = format!("placement/{}_{i}.png", cam.name);
+            png(&dir.join(&name), &img)?;
+            names.push(name);
+        }
+        let travels: Vec<String> = SYNTH_TRAVELS.iter().map(|t| t.to_string()).collect();
+        placement_args.push_str(&format!(
+            " \\\n  --camera {0} --intrinsics {0}.yaml --travels {1} {2}",
+            cam.name,
+            travels.join(","),
+            names.join(" ")
+        ));
+        let settings = ScanSettings { noise_sigma: noise, seed: seed + 77, ..ScanSettings::default() };
+        let scanner = Scanner::new(Scene::tabletop(), truth.clone(), LaserModel::default(), settings)?;
+        let mut names = Vec::new();
+        for (i, &hgt) in SYNTH_HEIGHTS.iter().enumerate() {
+            let img = scanner.render_at(ci, &table_from_carm(0.0, hgt, 0.0), true, (ci * 10 + i) as u64);
+            let name = format!("laser/{}_{i}.png", cam.name);
+            png(&dir.join(&name), &img)?;
+            names.push(name);
+        }
+        let heights: Vec<String> = SYNTH_HEIGHTS.iter().map(|t| t.to_string()).collect();
+        laser_args.push_str(&format!(" \\\n  --camera {} --heights {} {}", cam.name, heights.join(","), names.join(" ")));
+        println!("{}: {} board views, {} on the tabletop, {} laser lines", cam.name, poses.len(), SYNTH_TRAVELS.len(), SYNTH_HEIGHTS.len());
+    }
+    script.push_str(&placement_args);
+    script.push('\n');
+    script.push_str(&laser_args);
+    script.push('\n');
+    write_bytes_atomic(&dir.join("calibrate.sh"), script.as_bytes())?;
+    println!("calibration set written to {} (truth_rig.yaml; run calibrate.sh to calibrate from it)", dir.display());
+    Ok(())
+}
