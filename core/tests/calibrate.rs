@@ -60,7 +60,9 @@ fn placement_views(truth: &RigCamera, seed: u64) -> Vec<PlacementView> {
             let optical_from_board =
                 table_from_carm.compose(&truth.carm_from_optical()).inverse().compose(&placement_board());
             let img = render_board(&rays, &optical_from_board, &spec(), &look, &Exposure::default(), seed + i as u64);
-            let corners = detect(&img.view().unwrap(), &spec()).unwrap_or_else(|e| panic!("{} travel {t}: {e}", truth.name)).points;
+            let corners = detect(&img.view().unwrap(), &spec())
+                .unwrap_or_else(|e| panic!("{} travel {t}: {e}", truth.name))
+                .points;
             PlacementView { corners, table_from_carm }
         })
         .collect()
@@ -84,7 +86,8 @@ fn calibrate_all(truth: &Rig) -> Calibrated {
         let views = intrinsics_views(&model, 20, 100 * ci as u64 + 7);
         let r = calibrate_intrinsics(&spec(), &views, model.width, model.height, &IntrinsicsConfig::default()).unwrap();
         intrinsics_rms.push(r.rms_px);
-        let p = calibrate_placement(&spec(), &r.model, &placement_board(), &placement_views(cam, 50 + ci as u64)).unwrap();
+        let p =
+            calibrate_placement(&spec(), &r.model, &placement_board(), &placement_views(cam, 50 + ci as u64)).unwrap();
         rig.cameras[ci] = RigCamera::from_parts(&cam.name, &r.model, &p.carm_from_optical);
     }
     let mut views = Vec::new();
@@ -95,7 +98,13 @@ fn calibrate_all(truth: &Rig) -> Calibrated {
         }
     }
     let laser = calibrate_laser(&views, Vec3::Y).unwrap();
-    eprintln!("laser: rms {:.3} mm, max {:.3} mm, {} used, {} dropped", laser.rms_m * 1e3, laser.max_m * 1e3, laser.used, laser.dropped);
+    eprintln!(
+        "laser: rms {:.3} mm, max {:.3} mm, {} used, {} dropped",
+        laser.rms_m * 1e3,
+        laser.max_m * 1e3,
+        laser.used,
+        laser.dropped
+    );
     rig.laser_plane = laser.plane.to_params();
     Calibrated { rig, intrinsics_rms }
 }
@@ -121,7 +130,8 @@ fn plane_offset(truth: &Plane, cal: &Plane) -> f64 {
 
 fn scan_rms(truth: &Rig, used: &Rig) -> f64 {
     let settings = ScanSettings { speed_mps: 0.07, ..Default::default() };
-    let scanner = Scanner::new(Scene::by_name("pyramid").unwrap(), truth.clone(), LaserModel::default(), settings).unwrap();
+    let scanner =
+        Scanner::new(Scene::by_name("pyramid").unwrap(), truth.clone(), LaserModel::default(), settings).unwrap();
     let mut poses = PoseTrack::default();
     let mut t = -0.1;
     while t <= scanner.duration_s() + 0.1 {

@@ -109,7 +109,8 @@ impl Opts {
     }
     fn board(&self) -> anyhow::Result<BoardSpec> {
         let square = self.need("--square")?;
-        let square: f64 = square.parse().map_err(|_| usage(format!("--square: {square:?} is not a number (metres)")))?;
+        let square: f64 =
+            square.parse().map_err(|_| usage(format!("--square: {square:?} is not a number (metres)")))?;
         BoardSpec::parse(self.need("--board")?, square).map_err(|e| usage(format!("--board/--square: {e}")))
     }
 }
@@ -137,7 +138,8 @@ fn report_dir(o: &Opts, out: &Path, kind: &str) -> PathBuf {
     match o.get("--report") {
         Some(d) => PathBuf::from(d),
         None => {
-            let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "calibration".into());
+            let stem =
+                out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "calibration".into());
             out.with_file_name(format!("{stem}_{kind}_report"))
         }
     }
@@ -173,10 +175,9 @@ fn cmd_intrinsics(args: &[String]) -> anyhow::Result<()> {
     let o = Opts::parse(args, &["--board", "--square", "-o", "--out", "--name", "--model", "--report"], None)?;
     let spec = o.board()?;
     let out = PathBuf::from(o.get("-o").or(o.get("--out")).ok_or_else(|| usage("-o CAMERA.yaml is required"))?);
-    let model = match o.get("--model").unwrap_or("plumb_bob") {
-        m => DistortionModel::parse(m)
-            .ok_or_else(|| usage(format!("--model {m}: expected plumb_bob or rational_polynomial")))?,
-    };
+    let m = o.get("--model").unwrap_or("plumb_bob");
+    let model = DistortionModel::parse(m)
+        .ok_or_else(|| usage(format!("--model {m}: expected plumb_bob or rational_polynomial")))?;
     let name = o.get("--name").map(str::to_string).unwrap_or_else(|| {
         out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "camera".into())
     });
@@ -195,7 +196,11 @@ fn cmd_intrinsics(args: &[String]) -> anyhow::Result<()> {
             }
             Ok((_, s)) => {
                 let want = size.unwrap_or(s);
-                status.push((path.clone(), None, Some(format!("image is {}x{}, the others {}x{}", s.0, s.1, want.0, want.1))))
+                status.push((
+                    path.clone(),
+                    None,
+                    Some(format!("image is {}x{}, the others {}x{}", s.0, s.1, want.0, want.1)),
+                ))
             }
             Err(e) => status.push((path.clone(), None, Some(e))),
         }
@@ -205,10 +210,8 @@ fn cmd_intrinsics(args: &[String]) -> anyhow::Result<()> {
             println!("{}: not used: {why}", p.display());
         }
     }
-    let reasons: String = status
-        .iter()
-        .filter_map(|(p, _, w)| w.as_ref().map(|w| format!("\n  {}: {w}", p.display())))
-        .collect();
+    let reasons: String =
+        status.iter().filter_map(|(p, _, w)| w.as_ref().map(|w| format!("\n  {}: {w}", p.display()))).collect();
     let Some((w, h)) = size else {
         bail!("intrinsics: no image shows the {}x{} board{reasons}", spec.cols, spec.rows);
     };
@@ -338,7 +341,10 @@ fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
         Some(p) => read_rig(Path::new(p))?,
         None => {
             let r = Rig::study(640, 480);
-            println!("no --rig: starting a new rig (laser_plane {:?}, laser_source {:?} until calibrated)", r.laser_plane, r.laser_source);
+            println!(
+                "no --rig: starting a new rig (laser_plane {:?}, laser_source {:?} until calibrated)",
+                r.laser_plane, r.laser_source
+            );
             Rig { cameras: Vec::new(), ..r }
         }
     };
@@ -352,7 +358,8 @@ fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
     std::fs::create_dir_all(&dir).with_context(|| format!("report folder {}", dir.display()))?;
     let mut report = Vec::new();
     for (gi, g) in o.groups.iter().enumerate() {
-        let ipath = g.intrinsics.as_ref().ok_or_else(|| usage(format!("--camera {}: --intrinsics is required", g.camera)))?;
+        let ipath =
+            g.intrinsics.as_ref().ok_or_else(|| usage(format!("--camera {}: --intrinsics is required", g.camera)))?;
         let model: CameraModel = calibration::read(ipath)?.model().map_err(|e| anyhow!("{}: {e}", ipath.display()))?;
         let travels = per_image_values(g, "--travels")?;
         let mut views = Vec::new();
@@ -399,7 +406,8 @@ fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
         report.push(json!({"camera": g.camera, "intrinsics": ipath, "translation_m": [t.x, t.y, t.z],
                            "rotation_xyzw": [q.x, q.y, q.z, q.w], "rms_px": r.rms_px, "images": images}));
         let lim = r.residuals.iter().flatten().map(|d| d[0].abs().max(d[1].abs())).fold(0.2f64, f64::max) * 1.1;
-        let mut sc = Plot::new(&format!("{} PLACEMENT RESIDUALS", g.camera), "DU PX", "DV PX", (-lim, lim), (-lim, lim));
+        let mut sc =
+            Plot::new(&format!("{} PLACEMENT RESIDUALS", g.camera), "DU PX", "DV PX", (-lim, lim), (-lim, lim));
         sc.circle(0.0, 0.0, 0.2, GREY);
         for (i, res) in r.residuals.iter().enumerate() {
             for d in res {
@@ -408,7 +416,11 @@ fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
         }
         sc.write_png(&dir.join(format!("{}_residuals.png", g.camera)))?;
     }
-    write_rig(&out, &rig, "xsurf rig file (see launch-config/rig_study.yaml); placement by `xsurf calibrate placement`")?;
+    write_rig(
+        &out,
+        &rig,
+        "xsurf rig file (see launch-config/rig_study.yaml); placement by `xsurf calibrate placement`",
+    )?;
     write_json(
         &dir.join("report.json"),
         &json!({"kind": "placement", "board_origin_m": [origin.x, origin.y, origin.z], "cameras": report}),
@@ -418,7 +430,10 @@ fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
 }
 
 /// The laser line's centre pixels in an image (the edge detector's defaults).
-fn line_pixels(path: &Path) -> Result<(Vec<[f64; 2]>, (u32, u32)), String> {
+/// Pixel positions and the image size.
+type Pixels = (Vec<[f64; 2]>, (u32, u32));
+
+fn line_pixels(path: &Path) -> Result<Pixels, String> {
     let img = xsurf_formats::frames::read_frame(path).map_err(|e| e.to_string())?;
     let view = img.view().map_err(|e| e.to_string())?;
     let mut det = EdgeDetector::new(EdgeConfig::default()).map_err(|e| e.to_string())?;
@@ -445,15 +460,24 @@ fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
     let mut views = Vec::new();
     let mut files = Vec::new();
     for g in &o.groups {
-        let cam = rig
-            .camera(&g.camera)
-            .ok_or_else(|| anyhow!("rig file {}: no camera {:?}; run `xsurf calibrate placement` first", rig_path.display(), g.camera))?;
-        let geometry = cam.geometry().map_err(|e| anyhow!("rig file {}: camera {}: {e}", rig_path.display(), g.camera))?;
+        let cam = rig.camera(&g.camera).ok_or_else(|| {
+            anyhow!("rig file {}: no camera {:?}; run `xsurf calibrate placement` first", rig_path.display(), g.camera)
+        })?;
+        let geometry =
+            cam.geometry().map_err(|e| anyhow!("rig file {}: camera {}: {e}", rig_path.display(), g.camera))?;
         let heights = per_image_values(g, "--heights")?;
         for (p, &h) in g.images.iter().zip(&heights) {
             let (pixels, size) = line_pixels(p).map_err(|e| anyhow!("{}: {e}", p.display()))?;
             if size != (cam.width, cam.height) {
-                bail!("{}: image is {}x{}, camera {} is {}x{}", p.display(), size.0, size.1, g.camera, cam.width, cam.height);
+                bail!(
+                    "{}: image is {}x{}, camera {} is {}x{}",
+                    p.display(),
+                    size.0,
+                    size.1,
+                    g.camera,
+                    cam.width,
+                    cam.height
+                );
             }
             views.push(LaserView { camera: geometry.clone(), height_m: h, pixels });
             files.push((p.clone(), g.camera.clone(), h));
@@ -550,17 +574,16 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
         "#!/usr/bin/env bash\n# Calibrates the rig from this set (written by `xsurf calibrate synth`); compare rig.yaml with truth_rig.yaml.\nset -euo pipefail\ncd \"$(dirname \"$0\")\"\nB=\"--board {}x{} --square {square}\"\n",
         spec.cols, spec.rows
     );
-    let mut placement_args = format!(
-        "xsurf calibrate placement $B --board-origin {},{},0 -o rig.yaml",
-        origin.x, origin.y
-    );
+    let mut placement_args =
+        format!("xsurf calibrate placement $B --board-origin {},{},0 -o rig.yaml", origin.x, origin.y);
     let mut laser_args = String::from("xsurf calibrate laser --rig rig.yaml");
     for (ci, cam) in truth.cameras.iter().enumerate() {
         let model = cam.model()?;
         let rays = RayTable::new(&model);
         let poses = board_views(&model, &spec, count, seed + 1000 * ci as u64);
         for (i, pose) in poses.iter().enumerate() {
-            let img = render_board(&rays, pose, &spec, &BoardLook::default(), &exposure, seed ^ ((ci * 100 + i) as u64));
+            let img =
+                render_board(&rays, pose, &spec, &BoardLook::default(), &exposure, seed ^ ((ci * 100 + i) as u64));
             png(&dir.join(format!("intrinsics/{}_{i:02}.png", cam.name)), &img)?;
         }
         script.push_str(&format!("xsurf calibrate intrinsics $B -o {0}.yaml intrinsics/{0}_*.png\n", cam.name));
@@ -590,8 +613,19 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
             names.push(name);
         }
         let heights: Vec<String> = SYNTH_HEIGHTS.iter().map(|t| t.to_string()).collect();
-        laser_args.push_str(&format!(" \\\n  --camera {} --heights {} {}", cam.name, heights.join(","), names.join(" ")));
-        println!("{}: {} board views, {} on the tabletop, {} laser lines", cam.name, poses.len(), SYNTH_TRAVELS.len(), SYNTH_HEIGHTS.len());
+        laser_args.push_str(&format!(
+            " \\\n  --camera {} --heights {} {}",
+            cam.name,
+            heights.join(","),
+            names.join(" ")
+        ));
+        println!(
+            "{}: {} board views, {} on the tabletop, {} laser lines",
+            cam.name,
+            poses.len(),
+            SYNTH_TRAVELS.len(),
+            SYNTH_HEIGHTS.len()
+        );
     }
     script.push_str(&placement_args);
     script.push('\n');

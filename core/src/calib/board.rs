@@ -342,9 +342,8 @@ fn grow(pts: &[[f64; 2]], seed: usize) -> HashMap<Cell, usize> {
                 let n = preds.len() as f64;
                 let pred = [preds.iter().map(|q| q[0]).sum::<f64>() / n, preds.iter().map(|q| q[1]).sum::<f64>() / n];
                 let step2 = d2(pred, pc);
-                let best = (0..pts.len())
-                    .filter(|&k| !used[k])
-                    .min_by(|&x, &y| d2(pts[x], pred).total_cmp(&d2(pts[y], pred)));
+                let best =
+                    (0..pts.len()).filter(|&k| !used[k]).min_by(|&x, &y| d2(pts[x], pred).total_cmp(&d2(pts[y], pred)));
                 if let Some(k) = best {
                     if d2(pts[k], pred) < 0.35f64.powi(2) * step2 {
                         grid.insert(t, k);
@@ -458,7 +457,9 @@ pub fn detect(view: &ImageView<'_>, spec: &BoardSpec) -> Result<Corners, BoardEr
     for &seed in order.iter().take(12) {
         let grid = unshear(grow(&pts, seed));
         let (_, _, ci, cj, full) = extent(&grid);
-        let fits = full && ((ci as usize, cj as usize) == (spec.cols, spec.rows) || (ci as usize, cj as usize) == (spec.rows, spec.cols));
+        let fits = full
+            && ((ci as usize, cj as usize) == (spec.cols, spec.rows)
+                || (ci as usize, cj as usize) == (spec.rows, spec.cols));
         if fits {
             return Ok(label(&grid, &pts, spec, &fine));
         }
@@ -513,7 +514,14 @@ fn label(grid: &HashMap<Cell, usize>, pts: &[[f64; 2]], spec: &BoardSpec, g: &Gr
 }
 
 /// Why the best lattice is not the board.
-fn explain(raw: &Grey, best: &HashMap<Cell, usize>, pts: &[[f64; 2]], spec: &BoardSpec, lo: f64, hi: f64) -> BoardError {
+fn explain(
+    raw: &Grey,
+    best: &HashMap<Cell, usize>,
+    pts: &[[f64; 2]],
+    spec: &BoardSpec,
+    lo: f64,
+    hi: f64,
+) -> BoardError {
     if hi < 40.0 {
         return BoardError::TooDark { p99: hi };
     }

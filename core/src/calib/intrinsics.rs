@@ -225,7 +225,8 @@ fn solve_views(
                 let h = homography(&plane, &norm)
                     .ok_or_else(|| CalibError::Degenerate("a view's corners are collinear".into()))?;
                 poses.push(
-                    pose_from_homography(&h).ok_or_else(|| CalibError::Degenerate("a view's pose is undefined".into()))?,
+                    pose_from_homography(&h)
+                        .ok_or_else(|| CalibError::Degenerate("a view's pose is undefined".into()))?,
                 );
             }
             State { k: [fx, fy, c[0], c[1]], d: vec![0.0; cfg.model.coefficients()], poses }
@@ -253,7 +254,12 @@ pub fn calibrate(
         )));
     }
     if views.len() < NEEDED {
-        return Err(CalibError::TooFewViews { what: "intrinsics", usable: views.len(), needed: NEEDED, reasons: String::new() });
+        return Err(CalibError::TooFewViews {
+            what: "intrinsics",
+            usable: views.len(),
+            needed: NEEDED,
+            reasons: String::new(),
+        });
     }
     let all: Vec<&[[f64; 2]]> = views.iter().map(|v| v.as_slice()).collect();
     let mut sol = solve_views(spec, &all, (width, height), cfg, None)?;
@@ -263,7 +269,11 @@ pub fn calibrate(
             .enumerate()
             .map(|(i, &v)| {
                 let res: Vec<[f64; 2]> = (0..spec.len())
-                    .map(|k| problem.project(s, &s.poses[i], k).map_or([1e3, 1e3], |p| [p[0] - views[v][k][0], p[1] - views[v][k][1]]))
+                    .map(|k| {
+                        problem
+                            .project(s, &s.poses[i], k)
+                            .map_or([1e3, 1e3], |p| [p[0] - views[v][k][0], p[1] - views[v][k][1]])
+                    })
                     .collect();
                 rms(&res)
             })
@@ -294,7 +304,15 @@ pub fn calibrate(
         sol = solve_views(spec, &sub, (width, height), cfg, Some((&start, &poses)))?;
     }
     let s = &sol.state;
-    let model = CameraModel { width, height, fx: s.k[0], fy: s.k[1], cx: s.k[2], cy: s.k[3], distortion: cfg.model.build(&s.d) };
+    let model = CameraModel {
+        width,
+        height,
+        fx: s.k[0],
+        fy: s.k[1],
+        cx: s.k[2],
+        cy: s.k[3],
+        distortion: cfg.model.build(&s.d),
+    };
     model.validate().map_err(|e| CalibError::Degenerate(e.to_string()))?;
     // Every view's residuals under the final model; rejected views get their own pose fitted.
     let mut out = Vec::new();
@@ -308,7 +326,8 @@ pub fn calibrate(
             .collect();
         out.push(ViewResult { pose, rms_px: rms(&residuals), residuals, rejected: rejected[v].clone() });
     }
-    let used_res: Vec<[f64; 2]> = out.iter().filter(|v| v.rejected.is_none()).flat_map(|v| v.residuals.iter().copied()).collect();
+    let used_res: Vec<[f64; 2]> =
+        out.iter().filter(|v| v.rejected.is_none()).flat_map(|v| v.residuals.iter().copied()).collect();
     let std_devs = sol.std_devs(4 + cfg.model.coefficients()).unwrap_or_default();
     Ok(IntrinsicsResult { model, std_devs, views: out, rms_px: rms(&used_res), report: sol.report })
 }

@@ -90,7 +90,8 @@ pub fn calibrate(views: &[LaserView], reference_normal: Vec3) -> Result<LaserRes
             reasons.push_str(&format!("\n  view {v}: laser line not found ({ok} points on the tabletop)"));
         }
     }
-    let usable: Vec<usize> = (0..views.len()).filter(|&v| points[v].iter().filter(|p| p.is_finite()).count() >= 10).collect();
+    let usable: Vec<usize> =
+        (0..views.len()).filter(|&v| points[v].iter().filter(|p| p.is_finite()).count() >= 10).collect();
     if usable.is_empty() {
         return Err(CalibError::TooFewViews { what: "laser plane", usable: 0, needed: 2, reasons });
     }
@@ -113,12 +114,14 @@ pub fn calibrate(views: &[LaserView], reference_normal: Vec3) -> Result<LaserRes
         )));
     }
     let sigma = vals[0].sqrt();
-    let kept: Vec<Vec3> = all.iter().copied().filter(|p| plane.signed_distance(*p).abs() <= 3.0 * sigma.max(1e-6)).collect();
+    let kept: Vec<Vec3> =
+        all.iter().copied().filter(|p| plane.signed_distance(*p).abs() <= 3.0 * sigma.max(1e-6)).collect();
     let (mut plane, _) = fit(&kept).ok_or_else(|| CalibError::Degenerate("too few laser points".into()))?;
     if plane.normal.dot(reference_normal) < 0.0 {
         plane = Plane { normal: -plane.normal, d: -plane.d };
     }
-    let residuals: Vec<Vec<f64>> = points.iter().map(|pts| pts.iter().map(|p| plane.signed_distance(*p)).collect()).collect();
+    let residuals: Vec<Vec<f64>> =
+        points.iter().map(|pts| pts.iter().map(|p| plane.signed_distance(*p)).collect()).collect();
     let d: Vec<f64> = kept.iter().map(|p| plane.signed_distance(*p)).collect();
     let rms_m = (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt();
     let max_m = d.iter().fold(0.0f64, |a, v| a.max(v.abs()));

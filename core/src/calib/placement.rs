@@ -88,7 +88,8 @@ fn rms(r: &[f64]) -> f64 {
 /// The start pose `optical <- board` of one view from its undistorted corners.
 fn initial_pose(spec: &BoardSpec, model: &CameraModel, corners: &[[f64; 2]]) -> Option<Iso3> {
     let plane: Vec<[f64; 2]> = (0..spec.len()).map(|k| [spec.point(k).x, spec.point(k).y]).collect();
-    let norm: Vec<[f64; 2]> = corners.iter().map(|p| model.ray(p[0], p[1]).map(|r| [r.x, r.y])).collect::<Option<_>>()?;
+    let norm: Vec<[f64; 2]> =
+        corners.iter().map(|p| model.ray(p[0], p[1]).map(|r| [r.x, r.y])).collect::<Option<_>>()?;
     pose_from_homography(&homography(&plane, &norm)?)
 }
 
@@ -114,7 +115,11 @@ pub fn calibrate(
         return Err(CalibError::TooFewViews { what: "placement", usable: 0, needed: 1, reasons: String::new() });
     }
     if let Some(v) = views.iter().position(|v| v.corners.len() != spec.len()) {
-        return Err(CalibError::Degenerate(format!("view {v} has {} corners, the board {}", views[v].corners.len(), spec.len())));
+        return Err(CalibError::Degenerate(format!(
+            "view {v} has {} corners, the board {}",
+            views[v].corners.len(),
+            spec.len()
+        )));
     }
     let first = &views[0];
     let optical_from_board = initial_pose(spec, model, &first.corners)

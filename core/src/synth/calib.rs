@@ -63,9 +63,11 @@ impl RayTable {
         for y in 0..=h {
             for x in 0..=w {
                 let (u, v) = (x as f64 - 0.5, y as f64 - 0.5);
-                rays.push(
-                    model.ray(u, v).unwrap_or(Vec3::new((u - model.cx) / model.fx, (v - model.cy) / model.fy, 1.0)),
-                );
+                rays.push(model.ray(u, v).unwrap_or(Vec3::new(
+                    (u - model.cx) / model.fx,
+                    (v - model.cy) / model.fy,
+                    1.0,
+                )));
             }
         }
         RayTable { model: *model, rays }
@@ -209,7 +211,8 @@ pub fn board_in_view(model: &CameraModel, optical_from_board: &Iso3, spec: &Boar
 /// tilted 10-40 degrees, turned up to 20 degrees, spread over the image, every square in view.
 pub fn board_views(model: &CameraModel, spec: &BoardSpec, count: usize, seed: u64) -> Vec<Iso3> {
     let mut rng = SplitMix::new(seed ^ 0x5EED_CA1B);
-    let centre = Vec3::new((spec.cols as f64 - 1.0) * 0.5 * spec.square_m, (spec.rows as f64 - 1.0) * 0.5 * spec.square_m, 0.0);
+    let centre =
+        Vec3::new((spec.cols as f64 - 1.0) * 0.5 * spec.square_m, (spec.rows as f64 - 1.0) * 0.5 * spec.square_m, 0.0);
     let mut out = Vec::new();
     let mut tries = 0;
     while out.len() < count && tries < 100_000 {

@@ -1,0 +1,151 @@
+//! `xsurf calibrate` end to end (issue: calibration): a synthetic set rendered with known
+//! truth, the commands a technician runs (the set's own calibrate.sh), the rig they write against
+//! the truth, the camera_calibration YAML read by our camera_driver and checked field for field
+//! by an independent YAML parser, the reports, and the failures a technician meets.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use common::{assert_clean_failure, checker, scratch, xsurf};
+use std::process::Command;
+use xsurf_core::geom::Plane;
+use xsurf_core::rig::Rig;
+use xsurf_nodes::components::{build, declarations};
+use xsurf_runtime::component::Msg;
+use xsurf_runtime::params::{ParamValue as V, Params};
+use xsurf_runtime::router::Router;
+
+fn rig(path: &std::path::Path) -> Rig {
+    serde_yaml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn a_synthetic_set_calibrates_to_the_truth_through_the_cli() {
+    let dir = scratch("calibrate");
+    let out = xsurf(&["calibrate", "synth", dir.to_str().unwrap(), "--seed", "5"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // The technician's commands, as the set lists them, with our binary on PATH.
+    let bin = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
+    let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap_or_default());
+    let run = Command::new("bash").arg(dir.join("calibrate.sh")).env("PATH", &path).output().unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&run.stderr));
+    eprintln!("{stdout}");
+
+    let (truth, cal) = (rig(&dir.join("truth_rig.yaml")), rig(&dir.join("rig.yaml")));
+    for t in &truth.cameras {
+        let c = cal.camera(&t.name).unwrap();
+        assert!((c.fx / t.fx - 1.0).abs() < 0.003 && (c.fy / t.fy - 1.0).abs() < 0.003, "{c:?}");
+        assert!((c.cx - t.cx).abs() < 0.5 && (c.cy - t.cy).abs() < 0.5, "{c:?}");
+        let (a, b) = (c.carm_from_optical(), t.carm_from_optical());
+        let dt = (a.translation - b.translation).norm();
+        let dr = a.rotation.angle_to(&b.rotation).to_degrees();
+        assert!(dt < 0.001 && dr < 0.1, "{}: placement {dt} m {dr} deg", t.name);
+    }
+    let (tp, cp) = (Plane::from_params(truth.laser_plane).unwrap(), Plane::from_params(cal.laser_plane).unwrap());
+    assert!(tp.normal.dot(cp.normal).acos().to_degrees() < 0.1, "{:?}", cal.laser_plane);
+    assert!((tp.d - cp.d).abs() < 0.0005, "{:?}", cal.laser_plane);
+
+    // Reports: numbers per image and per point, and plots that decode.
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("cam1_intrinsics_report/report.json")).unwrap()).unwrap();
+    let images = report["images"].as_array().unwrap();
+    assert_eq!(images.len(), 20);
+    assert!(images.iter().all(|i| i["status"] == "used" && i["residuals_px"].as_array().unwrap().len() == 54));
+    for png in [
+        "cam1_intrinsics_report/rms_per_image.png",
+        "cam1_intrinsics_report/residuals.png",
+        "cam1_intrinsics_report/coverage.png",
+        "rig_placement_report/cam2_residuals.png",
+        "rig_laser_report/residuals.png",
+    ] {
+        let (w, h, _) = xsurf_formats::image::decode_png_rgb(&std::fs::read(dir.join(png)).unwrap()).unwrap();
+        assert_eq!((w, h), (640, 400), "{png}");
+    }
+    let laser: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("rig_laser_report/report.json")).unwrap()).unwrap();
+    assert_eq!(laser["images"].as_array().unwrap().len(), 6);
+
+    // The camera_calibration file: the ROS writer's layout, field for field (PyYAML)...
+    if let Some(parsed) = checker("check_calibration_yaml.py", &[&dir.join("cam1.yaml")]) {
+        assert_eq!(parsed["camera_name"], "cam1");
+        assert_eq!(parsed["camera_matrix"]["data"][0].as_f64().unwrap(), cal.cameras[0].fx);
+    }
+    // ...and what our camera_driver publishes as camera_info from it.
+    let o = [
+        ("source", V::String("files".into())),
+        ("files", V::String(dir.join("placement/cam1_%d.png").to_string_lossy().into())),
+        ("camera_info_url", V::String(format!("file://{}", dir.join("cam1.yaml").display()))),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect();
+    let p = Params::resolve(&declarations("camera_driver").unwrap(), &o).unwrap();
+    let mut router = Router::new();
+    router.add(build("camera_driver", &p).unwrap(), "camera_driver", "/cam1", &[]);
+    let seen = std::rc::Rc::new(std::cell::RefCell::new(Vec::new()));
+    let s = seen.clone();
+    router.set_tap(Box::new(move |t, m| s.borrow_mut().push((t.to_string(), m.clone()))));
+    for k in 0..5 {
+        router.tick(1_000_000_000 + k * 100_000_000);
+    }
+    let info = seen
+        .borrow()
+        .iter()
+        .find_map(|(t, m)| match m {
+            Msg::CameraInfo(c) if t == "/cam1/camera_info" => Some(c.clone()),
+            _ => None,
+        })
+        .expect("camera_info published");
+    let c = &cal.cameras[0];
+    assert_eq!(info.k, [c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0]);
+    assert_eq!(info.d, c.d);
+    assert_eq!(info.distortion_model, "plumb_bob");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn calibration_failures_name_the_image_and_the_reason() {
+    let dir = scratch("calibrate-fail");
+    assert!(xsurf(&["calibrate", "synth", dir.to_str().unwrap(), "--views", "3", "--size", "320x240"])
+        .status
+        .success());
+    let s = |p: &str| dir.join(p).to_string_lossy().into_owned();
+    let b = ["--board", "9x6", "--square", "0.02765"];
+    // Laser images have no board: each is named with its reason; with one board view left
+    // there is too little to calibrate.
+    let mut args = vec!["calibrate", "intrinsics"];
+    args.extend(b);
+    let (o, l0, l1, i0) = (s("c.yaml"), s("laser/cam1_0.png"), s("laser/cam1_1.png"), s("intrinsics/cam1_00.png"));
+    args.extend(["-o", &o, &l0, &l1, &i0]);
+    let out = xsurf(&args);
+    assert_clean_failure(&out, 1, "1 usable, 3 needed");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("cam1_0.png: board not found"), "{err}");
+    assert!(!dir.join("c.yaml").exists(), "nothing written on failure");
+    // A missing option is a usage error.
+    let out = xsurf(&["calibrate", "intrinsics", "--board", "9x6", "-o", &o, &i0]);
+    assert_clean_failure(&out, 2, "--square is required");
+    // One tabletop height: the plane is refused.
+    let truth = s("truth_rig.yaml");
+    let out = xsurf(&[
+        "calibrate",
+        "laser",
+        "--rig",
+        &truth,
+        "-o",
+        &s("r.yaml"),
+        "--camera",
+        "cam1",
+        "--heights",
+        "0.12",
+        &l1,
+        &l1,
+    ]);
+    assert_clean_failure(&out, 1, "two or more tabletop heights");
+    assert!(!dir.join("r.yaml").exists());
+    // A camera the rig does not have.
+    let out = xsurf(&["calibrate", "laser", "--rig", &truth, "--camera", "cam9", "--heights", "0,0.1", &l0, &l1]);
+    assert_clean_failure(&out, 1, "no camera \"cam9\"");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
