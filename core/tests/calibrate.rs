@@ -275,3 +275,42 @@ fn a_single_tabletop_height_is_refused() {
     let e = calibrate_laser(&views, Vec3::Y).unwrap_err();
     assert!(e.to_string().contains("view 3: laser line not found"), "{e}");
 }
+
+#[test]
+fn a_wide_lens_calibrates_with_the_rational_polynomial_model() {
+    use xsurf_core::calib::intrinsics::DistortionModel;
+    use xsurf_core::camera::Distortion;
+    // A wide lens with strong barrel distortion, as OpenCV's rational model describes it.
+    let truth = CameraModel {
+        width: 640,
+        height: 480,
+        fx: 420.0,
+        fy: 421.0,
+        cx: 318.0,
+        cy: 243.0,
+        distortion: Distortion::RationalPolynomial { d: [0.4, -0.05, 0.0004, -0.0002, 0.0, 0.75, 0.0, 0.0] },
+    };
+    let views = intrinsics_views(&truth, 20, 77);
+    let cfg = IntrinsicsConfig { model: DistortionModel::RationalPolynomial, ..IntrinsicsConfig::default() };
+    let r = calibrate_intrinsics(&spec(), &views, 640, 480, &cfg).unwrap();
+    let m = r.model;
+    eprintln!("rational: fx {} fy {} cx {} cy {} d {:?} rms {}", m.fx, m.fy, m.cx, m.cy, m.distortion, r.rms_px);
+    assert!(r.rms_px < 0.2, "rms {}", r.rms_px);
+    assert!((m.fx / truth.fx - 1.0).abs() < 0.003 && (m.fy / truth.fy - 1.0).abs() < 0.003);
+    assert!((m.cx - truth.cx).abs() < 0.5 && (m.cy - truth.cy).abs() < 0.5);
+    // The fitted model maps the image like the true one wherever the board was seen
+    // (coefficients of a rational model trade off against each other, and it is not meant to
+    // extrapolate beyond the calibrated field; the mapping is what matters).
+    let (mut worst, mut sum2, mut n) = (0.0f64, 0.0, 0.0);
+    for p in views.iter().flatten() {
+        let (a, b) = (truth.ray(p[0], p[1]).unwrap(), m.ray(p[0], p[1]).unwrap());
+        let e = ((a.x - b.x).powi(2) + (a.y - b.y).powi(2)).sqrt() * truth.fx;
+        worst = worst.max(e);
+        sum2 += e * e;
+        n += 1.0;
+    }
+    let rms = (sum2 / n).sqrt();
+    eprintln!("mapping difference over the observed corners: rms {rms:.3} px, max {worst:.3} px");
+    assert!(rms < 0.3, "mapping differs by {rms} px rms");
+    assert!(worst < 1.0, "mapping differs by up to {worst} px");
+}

@@ -42,7 +42,7 @@ pub fn declarations() -> Vec<ParamDecl> {
             "camera_info_url",
             V::String(String::new()),
             "",
-            "camera_calibration YAML (file:///path or a path); empty: the rig's intrinsics",
+            "camera_calibration YAML (file:///path or a path), as `xsurf calibrate intrinsics` writes it; empty: the rig's intrinsics",
         ),
         decl("rotate_180", V::Bool(false), "", "turn every image by 180 degrees before publishing"),
         decl(
