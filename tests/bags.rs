@@ -94,7 +94,8 @@ fn bag_written_by_rosbags_is_reconstructed() {
     .unwrap();
     let scene = xsurf_core::synth::Scene::by_name("pyramid").unwrap();
     let acc = xsurf_core::eval::accuracy(xsurf_core::eval::surface_errors(&scene, &merged.positions));
-    assert!(acc.points > 20_000 && acc.rms_m < 0.001, "{acc:?}");
+    // Two cameras fused into one layer: about 18 000 points.
+    assert!(acc.points > 14_000 && acc.rms_m < 0.001, "{acc:?}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -62,8 +62,9 @@ fn live(mode: &str, seconds: u32) {
     let scene = xsurf_core::synth::Scene::by_name("pyramid").unwrap();
     let acc = eval::accuracy(eval::surface_errors(&scene, &merged.positions));
     eprintln!("{mode}: {acc:?}");
-    // 320x240 at 70 mm/s and 15 fps: about 75 frames x 2 cameras x ~220 points.
-    assert!(acc.points > 20_000, "{acc:?}\n{}", logs());
+    // 320x240 at 70 mm/s and 15 fps: about 75 frames x 2 cameras x ~220 points, fused into one
+    // layer where both cameras see the pyramid (about 18 000).
+    assert!(acc.points > 14_000, "{acc:?}\n{}", logs());
     assert!(acc.rms_m <= 0.0010 && acc.outlier_fraction_2mm < 0.005, "{acc:?}");
     let e = eval::pyramid_extents(&scene, &merged.positions).expect("pyramid measurable");
     assert!(

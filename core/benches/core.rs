@@ -7,6 +7,7 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
 use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine, Method};
+use xsurf_core::fuse::{one_surface, FuseConfig};
 use xsurf_core::image::{Encoding, Image};
 use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
 use xsurf_core::pose::table_from_carm;
@@ -65,13 +66,19 @@ fn triangulation(c: &mut Criterion) {
 
 /// A 480 x 390 grid (the study's full-body size) of a wavy surface with a few holes.
 fn body_grid() -> Grid {
+    camera_grid(0.0, |_| 100.0)
+}
+
+/// The wavy surface as one camera samples it: shifted by `shift` metres across, with a line
+/// strength that depends on the position across (x).
+fn camera_grid(shift: f32, strength: impl Fn(f32) -> f32) -> Grid {
     let (ns, nf) = (480usize, 390usize);
     let mut g = Grid::new(ns);
     for f in 0..nf {
         let y = f as f32 * 0.0047;
-        let points = (0..ns)
+        let points: Vec<[f32; 3]> = (0..ns)
             .map(|s| {
-                let x = s as f32 * 0.00125 - 0.3;
+                let x = s as f32 * 0.00125 - 0.3 + shift;
                 if (s * 7 + f * 13) % 97 == 0 {
                     [f32::NAN; 3]
                 } else {
@@ -81,7 +88,13 @@ fn body_grid() -> Grid {
             .collect();
         g.push(
             f as i64,
-            &Profile { points, intensity: vec![100.0; ns], rgb: None, range: vec![0.9; ns], outside_volume: 0 },
+            &Profile {
+                intensity: points.iter().map(|p: &[f32; 3]| strength(p[0])).collect(),
+                points,
+                rgb: None,
+                range: vec![0.9; ns],
+                outside_volume: 0,
+            },
         )
         .unwrap();
     }
@@ -105,5 +118,27 @@ fn meshing(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, edge_detection, triangulation, meshing);
+/// The merger's work for a full-body pair (issue: two-camera merging, target < 200 ms on one
+/// core): fuse the overlapping grids into one layer, mesh both, combine.
+fn merging(c: &mut Criterion) {
+    let mut g = c.benchmark_group("merge_2x480x390");
+    g.sample_size(10);
+    let a = camera_grid(0.0, |x| 120.0 - 100.0 * x);
+    let b = camera_grid(0.0006, |x| 120.0 + 100.0 * x);
+    g.throughput(Throughput::Elements((a.points().len() + b.points().len()) as u64));
+    let merge = |fuse: Option<FuseConfig>| {
+        let mut grids = [a.clone(), b.clone()];
+        if let Some(f) = fuse {
+            one_surface(&mut grids, &f);
+        }
+        let mut merged = mesh_grid(&grids[0], &MeshConfig::default());
+        merged.append(&mesh_grid(&grids[1], &MeshConfig::default()));
+        merged
+    };
+    g.bench_function("fuse_mesh_combine", |bch| bch.iter(|| merge(Some(FuseConfig::default()))));
+    g.bench_function("mesh_combine_no_fuse", |bch| bch.iter(|| merge(None)));
+    g.finish();
+}
+
+criterion_group!(benches, edge_detection, triangulation, meshing, merging);
 criterion_main!(benches);

@@ -32,6 +32,7 @@ pub mod calib;
 pub mod camera;
 pub mod edge;
 pub mod eval;
+pub mod fuse;
 pub mod geom;
 pub mod image;
 pub mod mesh;

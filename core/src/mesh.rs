@@ -67,6 +67,10 @@ impl Grid {
     pub fn points(&self) -> &[[f32; 3]] {
         &self.points
     }
+    /// The points, for in-place edits (a NaN point is a missing sample).
+    pub fn points_mut(&mut self) -> &mut [[f32; 3]] {
+        &mut self.points
+    }
     /// Laser strength, frame-major.
     pub fn intensity(&self) -> &[f32] {
         &self.intensity

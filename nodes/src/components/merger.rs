@@ -2,8 +2,10 @@
 //! one surface in `table` (`/surface/cloud`, `/surface/mesh`) after each END, and the files
 //! `<output_dir>/scan_<id>/{merged.ply, scene.wrl, scene.glb, preview.png}`.
 //!
-//! The cameras are placed by calibration (their clouds are already in `table`); each grid is
-//! meshed and the surfaces are combined. The merge waits `merge_delay_s` after END so the
+//! The cameras are placed by calibration (their clouds are already in `table`). Where they
+//! overlap, each region is kept from the camera that sees it better (brighter line) and the
+//! other camera's samples there are averaged into it (`fuse_distance_m`, `core/src/fuse.rs`), so
+//! the merged surface is one layer; then each grid is meshed and the surfaces are combined. The merge waits `merge_delay_s` after END so the
 //! meshers' final clouds arrive first. The radiograph placed by `xray_aligner`
 //! (`/xray/overlay`, marker id = scan id) goes under the surface in `scene.wrl`, `scene.glb`
 //! and `preview.png`, with `xray.png` beside them; one that arrives after the merge (a
@@ -14,7 +16,8 @@ use crate::convert;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
-use xsurf_core::mesh::{mesh_grid, Mesh, MeshConfig};
+use xsurf_core::fuse::{one_surface, FuseConfig};
+use xsurf_core::mesh::{mesh_grid, Grid, Mesh, MeshConfig};
 use xsurf_formats::scene::{Scene, Surface, TexturedPlane};
 use xsurf_msgs::pointcloud;
 use xsurf_msgs::sensor_msgs::PointCloud2;
@@ -42,6 +45,13 @@ pub fn declarations() -> Vec<ParamDecl> {
             "longest triangle edge when meshing each camera's grid",
         ),
         decl("min_angle_deg", V::Double(d.min_angle_deg.into()), "deg", "smallest triangle angle"),
+        decl(
+            "fuse_distance_m",
+            V::Double(FuseConfig::default().min_distance_m.into()),
+            "m",
+            "where cameras overlap, samples of different cameras closer than this are one observation: the \
+             region's better-lit camera keeps it, averaged with the other's (0: keep both layers)",
+        ),
         decl("transparency", V::Double(0.3), "", "surface transparency in the VRML and glTF scenes, 0..1"),
         decl(
             "output_dir",
@@ -64,6 +74,7 @@ struct Config {
     cameras: Vec<String>,
     delay_ns: i64,
     mesh: MeshConfig,
+    fuse: FuseConfig,
     transparency: f32,
     output_dir: Option<PathBuf>,
     frame_id: String,
@@ -85,6 +96,10 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         ..MeshConfig::default()
     };
     mesh.validate().map_err(|e| Params::invalid("merger", e))?;
+    let fuse = p.f64("fuse_distance_m")?;
+    if !(0.0..=0.05).contains(&fuse) {
+        return Err(Params::invalid("fuse_distance_m", format!("{fuse} is not in [0, 0.05]")));
+    }
     let transparency = p.f64("transparency")?;
     if !(0.0..=1.0).contains(&transparency) {
         return Err(Params::invalid("transparency", format!("{transparency} is not in [0, 1]")));
@@ -94,6 +109,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         cameras,
         delay_ns: (delay * 1e9) as i64,
         mesh,
+        fuse: FuseConfig { min_distance_m: fuse as f32, ..FuseConfig::default() },
         transparency: transparency as f32,
         output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
         frame_id: p.string("frame_id")?,
@@ -125,6 +141,7 @@ pub struct MergerNode {
     last_merge: Option<LastMerge>,
     merged_current: bool,
     bad_overlays: u64,
+    fused_dropped: u64,
     /// The last merge's cloud and mesh, published again between scans.
     last_outputs: super::Republisher,
 }
@@ -145,6 +162,7 @@ impl MergerNode {
             last_merge: None,
             merged_current: false,
             bad_overlays: 0,
+            fused_dropped: 0,
             last_outputs: super::Republisher::default(),
         })
     }
@@ -154,18 +172,23 @@ impl MergerNode {
         if self.clouds.is_empty() {
             return;
         }
-        let mut meshes: Vec<(String, Mesh)> = Vec::new();
+        let mut grids: Vec<(String, Grid)> = Vec::new();
         let mut stamp = 0;
         for (&i, cloud) in &self.clouds {
             stamp = stamp.max(cloud.header.stamp.nanos());
             match convert::cloud_grid(cloud) {
-                Ok(g) => meshes.push((self.cfg.cameras[i].clone(), mesh_grid(&g, &self.cfg.mesh))),
+                Ok(g) => grids.push((self.cfg.cameras[i].clone(), g)),
                 Err(e) => {
                     self.bad_clouds += 1;
                     log::warn!("merger: /{}/cloud: {e}", self.cfg.cameras[i]);
                 }
             }
         }
+        let (names, mut gs): (Vec<String>, Vec<Grid>) = grids.into_iter().unzip();
+        let fused = one_surface(&mut gs, &self.cfg.fuse);
+        self.fused_dropped += fused.dropped.iter().sum::<usize>() as u64;
+        let meshes: Vec<(String, Mesh)> =
+            names.into_iter().zip(&gs).map(|(n, g)| (n, mesh_grid(g, &self.cfg.mesh))).collect();
         let mut merged = Mesh::default();
         for (_, m) in &meshes {
             merged.append(m);
@@ -360,6 +383,7 @@ impl Component for MergerNode {
             ("triangles", self.triangles),
             ("bad_clouds", self.bad_clouds),
             ("bad_overlays", self.bad_overlays),
+            ("fused_dropped", self.fused_dropped),
         ]
     }
 }

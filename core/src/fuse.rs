@@ -1,0 +1,181 @@
+//! One surface from several cameras: where two cameras' grids overlap, the better observation
+//! of each region is kept and the other camera's samples there are dropped (or averaged into the
+//! kept one), so that the merged mesh has no double layer.
+//!
+//! "Better" is the laser line's strength averaged over a neighbourhood of the grid (a brighter
+//! line is a less grazing view of a better lit surface), so ownership changes in coherent
+//! regions rather than from sample to sample. After fusing, no two samples of different cameras
+//! are closer than `min_distance_m`.
+
+use crate::mesh::Grid;
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+
+/// Settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FuseConfig {
+    /// Samples of different cameras closer than this are one observation, metres.
+    pub min_distance_m: f32,
+    /// Average the dropped sample into the kept one (weighted by quality) instead of only
+    /// dropping it.
+    pub average: bool,
+    /// Half size of the grid window whose mean strength is a sample's quality, samples.
+    pub quality_radius: usize,
+}
+
+impl Default for FuseConfig {
+    fn default() -> Self {
+        Self { min_distance_m: 0.002, average: true, quality_radius: 3 }
+    }
+}
+
+/// What fusing did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FuseReport {
+    /// Samples dropped per grid.
+    pub dropped: Vec<usize>,
+    /// Samples that absorbed others.
+    pub fused: usize,
+    /// Close pairs examined.
+    pub pairs: usize,
+}
+
+/// Mean strength over a `(2r+1)^2` window of valid samples (a summed-area table).
+fn quality(g: &Grid, r: usize) -> Vec<f32> {
+    let (ns, nf) = (g.samples(), g.frames());
+    let pts = g.points();
+    let inten = g.intensity();
+    let w = ns + 1;
+    let mut sum = vec![0.0f64; (ns + 1) * (nf + 1)];
+    let mut cnt = vec![0u32; (ns + 1) * (nf + 1)];
+    for f in 0..nf {
+        for s in 0..ns {
+            let i = f * ns + s;
+            let (v, c) = if pts[i][0].is_finite() { (f64::from(inten[i].max(0.0)), 1) } else { (0.0, 0) };
+            let k = (f + 1) * w + s + 1;
+            sum[k] = v + sum[k - 1] + sum[k - w] - sum[k - w - 1];
+            cnt[k] = c + cnt[k - 1] + cnt[k - w] - cnt[k - w - 1];
+        }
+    }
+    let mut q = vec![0.0f32; ns * nf];
+    for f in 0..nf {
+        for s in 0..ns {
+            let (s0, s1, f0, f1) = (s.saturating_sub(r), (s + r + 1).min(ns), f.saturating_sub(r), (f + r + 1).min(nf));
+            let box_sum = sum[f1 * w + s1] - sum[f0 * w + s1] - sum[f1 * w + s0] + sum[f0 * w + s0];
+            let n = cnt[f1 * w + s1] + cnt[f0 * w + s0] - cnt[f0 * w + s1] - cnt[f1 * w + s0];
+            q[f * ns + s] = if n > 0 { (box_sum / f64::from(n)) as f32 } else { 0.0 };
+        }
+    }
+    q
+}
+
+/// Fuses the grids (all in `table`) in place: dropped samples become NaN.
+pub fn one_surface(grids: &mut [Grid], cfg: &FuseConfig) -> FuseReport {
+    let mut report = FuseReport { dropped: vec![0; grids.len()], ..FuseReport::default() };
+    if !(cfg.min_distance_m > 0.0) {
+        return report;
+    }
+    let r2 = cfg.min_distance_m * cfg.min_distance_m;
+    let qual: Vec<Vec<f32>> = grids.iter().map(|g| quality(g, cfg.quality_radius)).collect();
+    for j in 1..grids.len() {
+        for i in 0..j {
+            // Index grid i; walk grid j's samples.
+            let (lo, hi) = grids.split_at_mut(j);
+            let (gi, gj) = (&mut lo[i], &mut hi[0]);
+            let idx: Vec<usize> = (0..gi.points().len()).filter(|&k| gi.points()[k][0].is_finite()).collect();
+            if idx.is_empty() {
+                continue;
+            }
+            let entries: Vec<[f32; 3]> = idx.iter().map(|&k| gi.points()[k]).collect();
+            let Ok(tree) = ImmutableKdTree::<f32, 3>::new_from_slice(&entries) else { continue };
+            for b in 0..gj.points().len() {
+                let pb = gj.points()[b];
+                if !pb.iter().all(|v| v.is_finite()) {
+                    continue;
+                }
+                let near = tree.query(&pb).within::<SquaredEuclidean<f32>>(r2).execute();
+                let (mut acc, mut wsum) = ([0.0f32; 3], 0.0f32);
+                let mut b_dropped = false;
+                for nn in near {
+                    let a = idx[nn.item as usize];
+                    let pa = gi.points()[a];
+                    if !pa[0].is_finite() {
+                        continue; // dropped earlier
+                    }
+                    report.pairs += 1;
+                    let (qa, qb) = (qual[i][a], qual[j][b]);
+                    if qa >= qb {
+                        // Grid i keeps this region: b goes (into a).
+                        if cfg.average {
+                            let (wa, wb) = (qa.max(1e-3), qb.max(1e-3));
+                            let m = [0, 1, 2].map(|k| (pa[k] * wa + pb[k] * wb) / (wa + wb));
+                            gi.points_mut()[a] = m;
+                            report.fused += 1;
+                        }
+                        b_dropped = true;
+                        break;
+                    }
+                    // Grid j keeps it: a goes (into b).
+                    if cfg.average {
+                        let wa = qa.max(1e-3);
+                        acc = [0, 1, 2].map(|k| acc[k] + pa[k] * wa);
+                        wsum += wa;
+                    }
+                    gi.points_mut()[a] = [f32::NAN; 3];
+                    report.dropped[i] += 1;
+                }
+                if b_dropped {
+                    gj.points_mut()[b] = [f32::NAN; 3];
+                    report.dropped[j] += 1;
+                } else if wsum > 0.0 {
+                    let wb = qual[j][b].max(1e-3);
+                    gj.points_mut()[b] = [0, 1, 2].map(|k| (acc[k] + pb[k] * wb) / (wsum + wb));
+                    report.fused += 1;
+                }
+            }
+        }
+    }
+    // Averaging moved kept samples a little: drop the rare pair that came closer than the bound.
+    for j in 1..grids.len() {
+        for i in 0..j {
+            let (lo, hi) = grids.split_at_mut(j);
+            let (gi, gj) = (&mut lo[i], &mut hi[0]);
+            let idx: Vec<usize> = (0..gi.points().len()).filter(|&k| gi.points()[k][0].is_finite()).collect();
+            let entries: Vec<[f32; 3]> = idx.iter().map(|&k| gi.points()[k]).collect();
+            let Ok(tree) = ImmutableKdTree::<f32, 3>::new_from_slice(&entries) else { continue };
+            for b in 0..gj.points().len() {
+                let pb = gj.points()[b];
+                if !pb[0].is_finite() {
+                    continue;
+                }
+                if tree
+                    .query(&pb)
+                    .within::<SquaredEuclidean<f32>>(r2)
+                    .execute()
+                    .iter()
+                    .any(|nn| gi.points()[idx[nn.item as usize]][0].is_finite())
+                {
+                    gj.points_mut()[b] = [f32::NAN; 3];
+                    report.dropped[j] += 1;
+                }
+            }
+        }
+    }
+    report
+}
+
+/// The smallest distance between samples of different grids (for checks), metres; infinite
+/// when no two grids have samples.
+pub fn min_cross_distance(grids: &[Grid]) -> f32 {
+    let mut best = f32::INFINITY;
+    for j in 1..grids.len() {
+        for i in 0..j {
+            let entries: Vec<[f32; 3]> = grids[i].points().iter().copied().filter(|p| p[0].is_finite()).collect();
+            let Ok(tree) = ImmutableKdTree::<f32, 3>::new_from_slice(&entries) else { continue };
+            for p in grids[j].points().iter().filter(|p| p[0].is_finite()) {
+                let nn = tree.query(p).nearest_one::<SquaredEuclidean<f32>>().execute();
+                best = best.min(nn.distance.sqrt());
+            }
+        }
+    }
+    best
+}

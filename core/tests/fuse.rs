@@ -1,0 +1,69 @@
+//! One surface from two cameras (issue: two-camera merging): the study's pyramid scanned by
+//! both cameras, fused; measured against the synthetic truth.
+#![allow(clippy::unwrap_used)]
+
+use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine};
+use xsurf_core::eval::{accuracy, coverage, surface_errors};
+use xsurf_core::fuse::{min_cross_distance, one_surface, FuseConfig};
+use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
+use xsurf_core::pose::PoseTrack;
+use xsurf_core::rig::Rig;
+use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene};
+use xsurf_core::triangulate::{Profile, Triangulator, TriangulatorConfig};
+
+#[test]
+fn fused_pyramid_has_one_layer_full_coverage_and_no_loss_of_accuracy() {
+    let rig = Rig::study(320, 240);
+    let settings = ScanSettings { speed_mps: 0.14, ..Default::default() };
+    let scanner =
+        Scanner::new(Scene::by_name("pyramid").unwrap(), rig.clone(), LaserModel::default(), settings).unwrap();
+    let mut poses = PoseTrack::default();
+    let mut t = -0.1;
+    while t <= scanner.duration_s() + 0.1 {
+        poses.push(scanner.settings.start_stamp_ns + (t * 1e9).round() as i64, &scanner.pose_at(t));
+        t += 0.01;
+    }
+    let cfg = TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() };
+    let mut grids = Vec::new();
+    let mut truth = Vec::new();
+    for (ci, cam) in rig.cameras.iter().enumerate() {
+        let tri = Triangulator::new(cam.geometry().unwrap(), &cfg).unwrap();
+        let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
+        let mut grid = Grid::new(240);
+        let (mut line, mut prof) = (LaserLine::default(), Profile::default());
+        for f in 0..scanner.frame_count() {
+            let ft = scanner.frame_time(f);
+            det.detect(&scanner.render(ci, f).view().unwrap(), &mut line).unwrap();
+            tri.triangulate(&line, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
+            grid.push(ft.stamp_ns, &prof).unwrap();
+            truth.extend(scanner.observable_points(ci, f, cfg.min_ray_plane_angle_deg));
+        }
+        grids.push(grid);
+    }
+    let all =
+        |g: &[Grid]| g.iter().flat_map(|g| g.points().iter().copied().filter(|p| p[0].is_finite())).collect::<Vec<_>>();
+    let before = all(&grids);
+    let (acc0, cov0, d0) = (
+        accuracy(surface_errors(&scanner.scene, &before)),
+        coverage(&truth, &before, 0.003),
+        min_cross_distance(&grids),
+    );
+    let fuse = FuseConfig::default();
+    let report = one_surface(&mut grids, &fuse);
+    let after = all(&grids);
+    let (acc1, cov1, d1) =
+        (accuracy(surface_errors(&scanner.scene, &after)), coverage(&truth, &after, 0.003), min_cross_distance(&grids));
+    eprintln!(
+        "before: {} points, rms {:.3} mm, coverage {:.2} %, closest cross pair {:.3} mm\nafter: {} points, rms {:.3} mm, coverage {:.2} %, closest cross pair {:.3} mm; {report:?}",
+        before.len(), acc0.rms_m * 1e3, cov0 * 100.0, d0 * 1e3, after.len(), acc1.rms_m * 1e3, cov1 * 100.0, d1 * 1e3
+    );
+    assert!(d0 < 0.0005, "the cameras overlap before fusing");
+    assert!(d1 >= fuse.min_distance_m, "closest samples of different cameras {d1} m");
+    assert!(cov1 >= 0.95, "coverage of what both cameras observe {cov1}");
+    assert!(acc1.rms_m <= acc0.rms_m * 1.05, "rms {} -> {}", acc0.rms_m, acc1.rms_m);
+    assert!(report.dropped.iter().sum::<usize>() > before.len() / 5, "{report:?}");
+    // Each camera's mesh keeps its own region: neither disappears.
+    for g in &grids {
+        assert!(mesh_grid(g, &MeshConfig::default()).triangles.len() > 1000);
+    }
+}
