@@ -238,6 +238,10 @@ fn each_board_failure_is_explained() {
     let small = BoardSpec::parse("7x5", spec().square_m).unwrap();
     let e = detect(&img.view().unwrap(), &small).unwrap_err();
     assert!(e.to_string().contains("--board size"), "{e}");
+    // An image too small to hold anything.
+    let tiny = xsurf_core::image::Image::new(4, 3, xsurf_core::image::Encoding::Mono8);
+    let e = detect(&tiny.view().unwrap(), &spec()).unwrap_err();
+    assert!(matches!(e, BoardError::TooSmall { width: 4, height: 3 }), "{e}");
 }
 
 #[test]

@@ -75,6 +75,14 @@ pub struct Corners {
 /// Why no board was found, in terms a technician can act on.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum BoardError {
+    /// The image is too small to hold a board.
+    #[error("board not found: the image is only {width}x{height} pixels")]
+    TooSmall {
+        /// Width.
+        width: u32,
+        /// Height.
+        height: u32,
+    },
     /// Hardly any light.
     #[error("board not found: image too dark (99th percentile grey level {p99:.0} of 255): more light or exposure")]
     TooDark {
@@ -437,6 +445,9 @@ fn refine(g: &Grey, q0: [f64; 2], half: usize) -> [f64; 2] {
 
 /// Finds the board in an image.
 pub fn detect(view: &ImageView<'_>, spec: &BoardSpec) -> Result<Corners, BoardError> {
+    if view.width() < 16 || view.height() < 16 {
+        return Err(BoardError::TooSmall { width: view.width(), height: view.height() });
+    }
     let raw = Grey::from_view(view);
     let (lo, hi) = (raw.percentile(0.01), raw.percentile(0.99));
     let fine = raw.blurred(0.8);
