@@ -228,7 +228,8 @@ fn assert_pyramid(pts: &[[f32; 3]], what: &str) {
     let scene = xsurf_core::synth::Scene::by_name("pyramid").unwrap();
     let acc = eval::accuracy(eval::surface_errors(&scene, pts));
     eprintln!("{what}: {acc:?}");
-    assert!(acc.points > 10_000 && acc.rms_m <= 0.001 && acc.outlier_fraction_2mm < 0.005, "{what}: {acc:?}");
+    // One layer (the cameras fused where they overlap): about 7 700 points for the stand-in's scan.
+    assert!(acc.points > 5_000 && acc.rms_m <= 0.001 && acc.outlier_fraction_2mm < 0.005, "{what}: {acc:?}");
 }
 
 /// rviz2's view of the live graph (the committed launch file, composed): a Cyclone DDS peer with
