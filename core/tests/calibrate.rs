@@ -3,6 +3,8 @@
 //! a scan reconstructed with the calibrated rig against the same scan with the true rig.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use xsurf_core::calib::board::{detect, BoardError, BoardSpec};
 use xsurf_core::calib::intrinsics::{calibrate as calibrate_intrinsics, IntrinsicsConfig};
 use xsurf_core::calib::laser::{calibrate as calibrate_laser, LaserView};
@@ -12,12 +14,10 @@ use xsurf_core::camera::CameraModel;
 use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine};
 use xsurf_core::eval::{accuracy, surface_errors};
 use xsurf_core::geom::{Iso3, Plane, Vec3};
-use xsurf_core::mesh::Grid;
-use xsurf_core::pose::{table_from_carm, PoseTrack};
+use xsurf_core::pose::table_from_carm;
 use xsurf_core::rig::{Rig, RigCamera};
 use xsurf_core::synth::calib::{board_views, render_board, BoardLook, Exposure, RayTable};
 use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene};
-use xsurf_core::triangulate::{CameraGeometry, Profile, Triangulator, TriangulatorConfig};
 
 fn spec() -> BoardSpec {
     // The study's board had 27.65 mm squares.
@@ -132,27 +132,7 @@ fn scan_rms(truth: &Rig, used: &Rig) -> f64 {
     let settings = ScanSettings { speed_mps: 0.07, ..Default::default() };
     let scanner =
         Scanner::new(Scene::by_name("pyramid").unwrap(), truth.clone(), LaserModel::default(), settings).unwrap();
-    let mut poses = PoseTrack::default();
-    let mut t = -0.1;
-    while t <= scanner.duration_s() + 0.1 {
-        poses.push(scanner.settings.start_stamp_ns + (t * 1e9).round() as i64, &scanner.pose_at(t));
-        t += 0.01;
-    }
-    let cfg = TriangulatorConfig { laser_plane: used.laser_plane, ..Default::default() };
-    let mut points = Vec::new();
-    for (ci, cam) in used.cameras.iter().enumerate() {
-        let tri = Triangulator::new(CameraGeometry { ..cam.geometry().unwrap() }, &cfg).unwrap();
-        let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
-        let mut grid = Grid::new(cam.height as usize);
-        let (mut line, mut prof) = (LaserLine::default(), Profile::default());
-        for f in 0..scanner.frame_count() {
-            let ft = scanner.frame_time(f);
-            det.detect(&scanner.render(ci, f).view().unwrap(), &mut line).unwrap();
-            tri.triangulate(&line, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
-            grid.push(ft.stamp_ns, &prof).unwrap();
-        }
-        points.extend_from_slice(grid.points());
-    }
+    let points: Vec<[f32; 3]> = common::camera_grids(&scanner, used).iter().flat_map(|g| g.points().to_vec()).collect();
     accuracy(surface_errors(&scanner.scene, &points)).rms_m
 }
 

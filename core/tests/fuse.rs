@@ -2,14 +2,14 @@
 //! both cameras, fused; measured against the synthetic truth.
 #![allow(clippy::unwrap_used)]
 
-use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine};
+mod common;
+
 use xsurf_core::eval::{accuracy, coverage, surface_errors};
 use xsurf_core::fuse::{min_cross_distance, one_surface, FuseConfig};
 use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
-use xsurf_core::pose::PoseTrack;
 use xsurf_core::rig::Rig;
 use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene};
-use xsurf_core::triangulate::{Profile, Triangulator, TriangulatorConfig};
+use xsurf_core::triangulate::TriangulatorConfig;
 
 #[test]
 fn fused_pyramid_has_one_layer_full_coverage_and_no_loss_of_accuracy() {
@@ -17,28 +17,13 @@ fn fused_pyramid_has_one_layer_full_coverage_and_no_loss_of_accuracy() {
     let settings = ScanSettings { speed_mps: 0.14, ..Default::default() };
     let scanner =
         Scanner::new(Scene::by_name("pyramid").unwrap(), rig.clone(), LaserModel::default(), settings).unwrap();
-    let mut poses = PoseTrack::default();
-    let mut t = -0.1;
-    while t <= scanner.duration_s() + 0.1 {
-        poses.push(scanner.settings.start_stamp_ns + (t * 1e9).round() as i64, &scanner.pose_at(t));
-        t += 0.01;
-    }
-    let cfg = TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() };
-    let mut grids = Vec::new();
+    let mut grids = common::camera_grids(&scanner, &rig);
+    let min_angle = TriangulatorConfig::default().min_ray_plane_angle_deg;
     let mut truth = Vec::new();
-    for (ci, cam) in rig.cameras.iter().enumerate() {
-        let tri = Triangulator::new(cam.geometry().unwrap(), &cfg).unwrap();
-        let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
-        let mut grid = Grid::new(240);
-        let (mut line, mut prof) = (LaserLine::default(), Profile::default());
+    for ci in 0..rig.cameras.len() {
         for f in 0..scanner.frame_count() {
-            let ft = scanner.frame_time(f);
-            det.detect(&scanner.render(ci, f).view().unwrap(), &mut line).unwrap();
-            tri.triangulate(&line, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
-            grid.push(ft.stamp_ns, &prof).unwrap();
-            truth.extend(scanner.observable_points(ci, f, cfg.min_ray_plane_angle_deg));
+            truth.extend(scanner.observable_points(ci, f, min_angle));
         }
-        grids.push(grid);
     }
     let all =
         |g: &[Grid]| g.iter().flat_map(|g| g.points().iter().copied().filter(|p| p[0].is_finite())).collect::<Vec<_>>();

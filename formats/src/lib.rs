@@ -16,6 +16,7 @@ pub mod image;
 pub mod plot;
 pub mod ply;
 pub mod preview;
+pub mod rig;
 pub mod scene;
 pub mod vrml;
 

@@ -11,6 +11,7 @@
 //! Each command prints its numbers, writes a report (`report.json` and PNG plots; by default in
 //! `<output>_<command>_report/`) and explains every image it could not use.
 
+use crate::UsageError;
 use anyhow::{anyhow, bail, Context};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -28,11 +29,6 @@ use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene};
 use xsurf_formats::calibration::{self, CameraCalibration};
 use xsurf_formats::plot::{palette, Plot, BLUE, GREY, RED};
 use xsurf_formats::write_bytes_atomic;
-
-/// A command-line mistake (the caller exits 2).
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct UsageError(pub String);
 
 fn usage(msg: impl Into<String>) -> anyhow::Error {
     anyhow!(UsageError(msg.into()))
@@ -156,19 +152,6 @@ fn find_board(path: &Path, spec: &BoardSpec) -> Result<(Corners, (u32, u32)), St
     let view = img.view().map_err(|e| e.to_string())?;
     let c = detect(&view, spec).map_err(|e| e.to_string())?;
     Ok((c, (img.width, img.height)))
-}
-
-fn read_rig(path: &Path) -> anyhow::Result<Rig> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("rig file {}", path.display()))?;
-    serde_yaml::from_str(&text).with_context(|| format!("rig file {}", path.display()))
-}
-
-/// Writes a rig file atomically, with a header saying what it is.
-pub fn write_rig(path: &Path, rig: &Rig, header: &str) -> anyhow::Result<()> {
-    let body = serde_yaml::to_string(rig)?;
-    let comments: String = header.lines().map(|l| format!("# {l}\n")).collect();
-    write_bytes_atomic(path, format!("{comments}{body}").as_bytes())?;
-    Ok(())
 }
 
 fn cmd_intrinsics(args: &[String]) -> anyhow::Result<()> {
@@ -338,7 +321,7 @@ fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
         )));
     }
     let mut rig = match o.get("--rig") {
-        Some(p) => read_rig(Path::new(p))?,
+        Some(p) => xsurf_formats::rig::read(Path::new(p))?,
         None => {
             let r = Rig::study(640, 480);
             println!(
@@ -416,7 +399,7 @@ fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
         }
         sc.write_png(&dir.join(format!("{}_residuals.png", g.camera)))?;
     }
-    write_rig(
+    xsurf_formats::rig::write(
         &out,
         &rig,
         "xsurf rig file (see launch-config/rig_study.yaml); placement by `xsurf calibrate placement`",
@@ -452,7 +435,7 @@ fn line_pixels(path: &Path) -> Result<Pixels, String> {
 fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
     let o = Opts::parse(args, &["-o", "--out", "--rig", "--report"], Some("--heights"))?;
     let rig_path = PathBuf::from(o.need("--rig")?);
-    let mut rig = read_rig(&rig_path)?;
+    let mut rig = xsurf_formats::rig::read(&rig_path)?;
     let out = PathBuf::from(o.get("-o").or(o.get("--out")).unwrap_or(o.need("--rig")?));
     if o.groups.is_empty() {
         return Err(usage("give at least one --camera NAME --heights H[,H...] IMAGE..."));
@@ -527,7 +510,11 @@ fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
         }
     }
     plot.write_png(&dir.join("residuals.png"))?;
-    write_rig(&out, &rig, "xsurf rig file (see launch-config/rig_study.yaml); laser_plane by `xsurf calibrate laser`")?;
+    xsurf_formats::rig::write(
+        &out,
+        &rig,
+        "xsurf rig file (see launch-config/rig_study.yaml); laser_plane by `xsurf calibrate laser`",
+    )?;
     write_json(
         &dir.join("report.json"),
         &json!({"kind": "laser", "laser_plane": rig.laser_plane, "rms_m": r.rms_m, "max_m": r.max_m,
@@ -566,7 +553,11 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
     for sub in ["intrinsics", "placement", "laser"] {
         std::fs::create_dir_all(dir.join(sub)).with_context(|| format!("{}", dir.join(sub).display()))?;
     }
-    write_rig(&dir.join("truth_rig.yaml"), &truth, "the true rig the calibration set was rendered with")?;
+    xsurf_formats::rig::write(
+        &dir.join("truth_rig.yaml"),
+        &truth,
+        "the true rig the calibration set was rendered with",
+    )?;
     // The placement board: centred under the C-arm at travel 0.
     let origin = Vec3::new(-(spec.cols as f64 - 1.0) * 0.5 * square, (spec.rows as f64 - 1.0) * 0.5 * square, 0.0);
     let board_pose = table_from_board(origin, 0.0);

@@ -17,3 +17,8 @@ pub mod play;
 pub mod record;
 pub mod synth;
 pub mod tf;
+
+/// A command-line mistake in an `xsurf` command (the binary prints its usage and exits 2).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);

@@ -220,8 +220,7 @@ pub fn write_truth(dir: &Path, scanner: &Scanner) -> anyhow::Result<Vec<usize>> 
         "truth_ply": "truth_<cam>.ply: points on the laser sheet each camera can observe (table frame, metres)",
     });
     xsurf_formats::write_bytes_atomic(&dir.join("truth.json"), serde_json::to_string_pretty(&truth)?.as_bytes())?;
-    let rig = serde_yaml::to_string(&scanner.rig).context("rig to YAML")?;
-    xsurf_formats::write_bytes_atomic(&dir.join("rig.yaml"), rig.as_bytes())?;
+    xsurf_formats::rig::write(&dir.join("rig.yaml"), &scanner.rig, "the rig this synthetic scan was rendered with")?;
     let p = scanner.rig.laser_plane;
     let params = format!(
         "# Parameters for reconstructing this synthetic scan (ROS 2 params-file format).\n/**:\n  ros__parameters:\n    laser_plane: [{}, {}, {}, {}]\n",

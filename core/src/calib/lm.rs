@@ -81,6 +81,29 @@ fn jacobian<P: Problem>(p: &P, s: &P::State, m: usize, jac: &mut [f64], scratch:
     }
 }
 
+/// `J^T J` and `J^T r` of the row-major `m x n` Jacobian, accumulated row by row.
+fn normal_equations(jac: &[f64], r: &[f64], n: usize, jtj: &mut [f64], jtr: &mut [f64]) {
+    jtj.fill(0.0);
+    jtr.fill(0.0);
+    for (row, ri) in jac.chunks_exact(n).zip(r) {
+        for a in 0..n {
+            let ja = row[a];
+            if ja == 0.0 {
+                continue;
+            }
+            jtr[a] += ja * ri;
+            for b in a..n {
+                jtj[a * n + b] += ja * row[b];
+            }
+        }
+    }
+    for a in 0..n {
+        for b in 0..a {
+            jtj[a * n + b] = jtj[b * n + a];
+        }
+    }
+}
+
 /// Minimises the sum of squared residuals from `s0`.
 pub fn solve<P: Problem>(p: &P, s0: P::State, max_iterations: usize) -> Solution<P::State> {
     let n = p.dim();
@@ -103,14 +126,7 @@ pub fn solve<P: Problem>(p: &P, s0: P::State, max_iterations: usize) -> Solution
     while iterations < max_iterations {
         if fresh {
             jacobian(p, &s, m, &mut jac, &mut scratch);
-            for a in 0..n {
-                for b in a..n {
-                    let v: f64 = (0..m).map(|i| jac[i * n + a] * jac[i * n + b]).sum();
-                    jtj[a * n + b] = v;
-                    jtj[b * n + a] = v;
-                }
-                jtr[a] = (0..m).map(|i| jac[i * n + a] * r[i]).sum();
-            }
+            normal_equations(&jac, &r, n, &mut jtj, &mut jtr);
             fresh = false;
         }
         iterations += 1;
@@ -152,13 +168,7 @@ pub fn solve<P: Problem>(p: &P, s0: P::State, max_iterations: usize) -> Solution
     }
     if fresh {
         jacobian(p, &s, m, &mut jac, &mut scratch);
-        for a in 0..n {
-            for b in a..n {
-                let v: f64 = (0..m).map(|i| jac[i * n + a] * jac[i * n + b]).sum();
-                jtj[a * n + b] = v;
-                jtj[b * n + a] = v;
-            }
-        }
+        normal_equations(&jac, &r, n, &mut jtj, &mut jtr);
     }
     Solution {
         state: s,

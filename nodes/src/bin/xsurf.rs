@@ -20,7 +20,7 @@ use xsurf_core::eval;
 use xsurf_core::image::Encoding;
 use xsurf_core::rig::Rig;
 use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene, SCENE_NAMES};
-use xsurf_nodes::{offline, synth};
+use xsurf_nodes::{offline, synth, UsageError};
 
 const USAGE: &str = "usage:
   xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S]
@@ -55,16 +55,6 @@ const USAGE: &str = "usage:
   xsurf launch FILE [--composed] [NAME:=VALUE...]
       start the nodes of a ROS 2 YAML launch file, one process each (or all in one with --composed);
       a node that dies stops the others and the launcher exits 1";
-
-/// A command-line mistake: exit code 2.
-#[derive(Debug)]
-struct UsageError(String);
-impl std::fmt::Display for UsageError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}\n{USAGE}", self.0)
-    }
-}
-impl std::error::Error for UsageError {}
 
 fn usage(msg: impl Into<String>) -> anyhow::Error {
     anyhow!(UsageError(msg.into()))
@@ -143,9 +133,7 @@ fn scanner(a: &Args, scene: &str) -> anyhow::Result<Scanner> {
     let rig = match a.get("--rig") {
         None => Rig::study(w, h),
         Some(f) => {
-            let text = std::fs::read_to_string(f).with_context(|| format!("--rig {f}"))?;
-            let rig: Rig = serde_yaml::from_str(&text)
-                .with_context(|| format!("--rig {f}: not a rig file (see launch-config/rig_study.yaml)"))?;
+            let rig = xsurf_formats::rig::read(Path::new(f)).with_context(|| format!("--rig {f}"))?;
             if a.get("--size").is_some() {
                 return Err(usage("--size and --rig: the rig file gives each camera's image size"));
             }
@@ -445,8 +433,6 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("xsurf: error: {e:#}");
             if e.downcast_ref::<UsageError>().is_some() {
-                ExitCode::from(2)
-            } else if e.downcast_ref::<xsurf_nodes::calibrate::UsageError>().is_some() {
                 eprintln!("{USAGE}");
                 ExitCode::from(2)
             } else if e.downcast_ref::<Incomplete>().is_some() {

@@ -85,9 +85,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     let rig = if rig_file.is_empty() {
         Rig::study(640, 480)
     } else {
-        let text =
-            std::fs::read_to_string(&rig_file).map_err(|e| Params::invalid("rig_file", format!("{rig_file}: {e}")))?;
-        serde_yaml::from_str(&text).map_err(|e| Params::invalid("rig_file", format!("{rig_file}: {e}")))?
+        xsurf_formats::rig::read(rig_file.as_ref()).map_err(|e| Params::invalid("rig_file", e.to_string()))?
     };
     let id = p.i64("scan_id")?;
     let encoder = match p.string("mode")?.as_str() {

@@ -151,9 +151,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     let rig = if rig_file.is_empty() {
         None
     } else {
-        let text =
-            std::fs::read_to_string(&rig_file).map_err(|e| Params::invalid("rig_file", format!("{rig_file}: {e}")))?;
-        Some(serde_yaml::from_str::<Rig>(&text).map_err(|e| Params::invalid("rig_file", format!("{rig_file}: {e}")))?)
+        Some(xsurf_formats::rig::read(rig_file.as_ref()).map_err(|e| Params::invalid("rig_file", e.to_string()))?)
     };
     Ok(Config {
         source,
