@@ -12,6 +12,7 @@
 //! stands.
 
 use crate::geom::{Iso3, Mat3, Plane, Quat, Vec3};
+use crate::mesh::{mesh_grid, Grid, Mesh, MeshConfig};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 
 /// One observed point of the camera being refined.
@@ -43,6 +44,89 @@ impl Observation {
         let t = (plane.d - plane.normal.dot(o)) / den;
         (t > 0.0).then(|| self.table_from_carm.transform_point(o + d * t))
     }
+
+    /// The derivatives of `normal . p` (`normal` in `table`, `p` the triangulated point) with
+    /// respect to the correction `(rotation vector, translation)` of [`corrected`] at zero:
+    /// the ray turns by `w x d` and the centre moves by `t`, and the point slides along the ray
+    /// to stay on the laser plane.
+    fn jacobian(&self, carm_from_optical: &Iso3, plane: &Plane, normal: Vec3) -> Option<[f64; 6]> {
+        let o = carm_from_optical.translation;
+        let d = carm_from_optical.transform_vector(self.ray);
+        let den = plane.normal.dot(d);
+        if den.abs() < 1e-12 {
+            return None;
+        }
+        let s = (plane.d - plane.normal.dot(o)) / den;
+        let g = self.table_from_carm.rotation.transpose().mul_vec(normal);
+        let g = g - plane.normal * (g.dot(d) / den);
+        let w = d.cross(g) * s;
+        Some([w.x, w.y, w.z, g.x, g.y, g.z])
+    }
+}
+
+/// The C-arm's motion during a scan as the merger sees it: travel along `table` Y at a fixed
+/// angle and tabletop height (`table -> carm` = rotation about Y by the angle, translation
+/// `(x, travel, z)`), so each frame's pose follows from the travel alone.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScanMotion {
+    /// `table -> carm` of any frame of the scan (its travel is not used).
+    pub table_from_carm: Iso3,
+}
+
+impl ScanMotion {
+    /// The pose at `travel_m`.
+    pub fn at(&self, travel_m: f64) -> Iso3 {
+        let mut t = self.table_from_carm;
+        t.translation.y = travel_m;
+        t
+    }
+
+    /// The travel at which the laser `plane` (in `carm`) passes through `p` (in `table`):
+    /// every triangulated point lies on the plane of its own frame. `None` when the plane is
+    /// parallel to the travel.
+    pub fn travel_of(&self, p: Vec3, plane: &Plane) -> Option<f64> {
+        let m = self.table_from_carm.rotation.mul_vec(plane.normal);
+        let t = self.table_from_carm.translation;
+        (m.y.abs() > 1e-6).then(|| (m.dot(p) - m.x * t.x - m.z * t.z - plane.d) / m.y)
+    }
+}
+
+/// The observations behind a camera's grid of points (frame-major, `samples` per frame, NaN
+/// where none): each point's frame pose recovered from its travel, and its ray through
+/// `carm_from_optical`. Returns `(grid index, observation)` pairs. Points of one frame must give
+/// one travel: a spread beyond `max_spread_m` means the C-arm turned or the tabletop moved
+/// during the scan, and is refused (naming the frame).
+pub fn grid_observations(
+    points: &[[f32; 3]],
+    samples: usize,
+    carm_from_optical: &Iso3,
+    plane: &Plane,
+    motion: &ScanMotion,
+    max_spread_m: f64,
+) -> Result<Vec<(usize, Observation)>, RefineError> {
+    let mut out = Vec::new();
+    for (f, col) in points.chunks(samples.max(1)).enumerate() {
+        let travels: Vec<(usize, Vec3, f64)> = col
+            .iter()
+            .enumerate()
+            .filter_map(|(s, p)| {
+                let v = Vec3::new(p[0].into(), p[1].into(), p[2].into());
+                v.is_finite().then(|| motion.travel_of(v, plane).map(|t| (s, v, t)))?
+            })
+            .collect();
+        if travels.is_empty() {
+            continue;
+        }
+        let (lo, hi) = travels.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x.2), b.max(x.2)));
+        if hi - lo > max_spread_m {
+            return Err(RefineError::NotOneTravel { frame: f, spread_m: hi - lo, max_spread_m });
+        }
+        let pose = motion.at((lo + hi) / 2.0);
+        out.extend(travels.iter().filter_map(|&(s, v, _)| {
+            Observation::from_point(v, &pose, carm_from_optical).map(|o| (f * samples + s, o))
+        }));
+    }
+    Ok(out)
 }
 
 /// Settings of the refinement.
@@ -68,6 +152,13 @@ pub struct RefineConfig {
     pub max_rotation_deg: f64,
     /// Largest RMS point-to-plane residual accepted after the fit, metres.
     pub max_rms_m: f64,
+    /// Laplacian smoothing passes over both surfaces before the fit (the refined placement is
+    /// then applied to the points as measured): averages the line detector's noise out of the
+    /// correspondences.
+    pub smooth_iterations: u32,
+    /// Points of one frame must lie on laser planes no further apart in travel than this,
+    /// metres (see [`grid_observations`]).
+    pub max_travel_spread_m: f64,
 }
 
 impl Default for RefineConfig {
@@ -77,12 +168,14 @@ impl Default for RefineConfig {
             max_distance_m: 0.01,
             trim_fraction: 0.9,
             huber_m: 0.001,
-            max_points: 20_000,
+            max_points: 8_000,
             min_overlap_points: 200,
             min_overlap_fraction: 0.05,
             max_translation_m: 0.02,
             max_rotation_deg: 2.0,
             max_rms_m: 0.001,
+            smooth_iterations: 3,
+            max_travel_spread_m: 0.001,
         }
     }
 }
@@ -150,8 +243,18 @@ pub enum RefineError {
     /// The geometry does not constrain the placement (a flat or featureless overlap).
     #[error("the overlap does not constrain the camera's placement (singular normal equations)")]
     Degenerate,
-    /// The reference surface is empty or its normals do not match its points.
-    #[error("the reference surface has {points} points and {normals} normals")]
+    /// The points of one frame lie on laser planes of different travels.
+    #[error("frame {frame}: its points lie on laser planes {spread_m:.5} m of travel apart (limit {max_spread_m} m): the C-arm turned or the tabletop moved during the scan")]
+    NotOneTravel {
+        /// The frame (grid column).
+        frame: usize,
+        /// Spread of the travels.
+        spread_m: f64,
+        /// Limit.
+        max_spread_m: f64,
+    },
+    /// The reference surface is (nearly) empty or its normals do not match its points.
+    #[error("the reference surface has {points} usable points and {normals} normals")]
     BadReference {
         /// Points.
         points: usize,
@@ -168,9 +271,10 @@ pub struct Reference {
 }
 
 impl Reference {
-    /// Indexes `points` (in `table`) with their `normals`; non-finite entries are left out.
+    /// Indexes `points` (in `table`) with their `normals`; non-finite entries and zero normals
+    /// are left out.
     pub fn new(points: &[Vec3], normals: &[Vec3]) -> Result<Self, RefineError> {
-        if points.len() != normals.len() || points.is_empty() {
+        if points.len() != normals.len() {
             return Err(RefineError::BadReference { points: points.len(), normals: normals.len() });
         }
         let (p, n): (Vec<Vec3>, Vec<Vec3>) = points
@@ -179,13 +283,31 @@ impl Reference {
             .filter(|(p, n)| p.is_finite() && n.is_finite() && n.norm() > 0.5)
             .map(|(p, n)| (*p, *n))
             .unzip();
-        if p.is_empty() {
-            return Err(RefineError::BadReference { points: 0, normals: 0 });
+        if p.len() < 3 {
+            return Err(RefineError::BadReference { points: p.len(), normals: n.len() });
         }
         let entries: Vec<[f64; 3]> = p.iter().map(|v| v.to_array()).collect();
         let tree = ImmutableKdTree::new_from_slice(&entries)
             .map_err(|_| RefineError::BadReference { points: p.len(), normals: n.len() })?;
         Ok(Self { points: p, normals: n, tree })
+    }
+
+    /// The surface of a mesh (its vertices and vertex normals).
+    pub fn from_mesh(mesh: &Mesh) -> Result<Self, RefineError> {
+        let v = |a: &[f32; 3]| Vec3::new(a[0].into(), a[1].into(), a[2].into());
+        let p: Vec<Vec3> = mesh.positions.iter().map(v).collect();
+        let n: Vec<Vec3> = mesh.normals.iter().map(v).collect();
+        Self::new(&p, &n)
+    }
+
+    /// Points indexed.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// True if no point is indexed (never, once built).
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
     }
 
     /// The nearest reference point to `q` within `max_d`: its index.
@@ -248,7 +370,7 @@ pub fn refine_camera(
 ) -> Result<RefineReport, RefineError> {
     let step = observations.len().div_ceil(cfg.max_points.max(1)).max(1);
     let obs: Vec<&Observation> = observations.iter().step_by(step).collect();
-    // Residuals of the current placement: (observation index, reference index, residual).
+    // Correspondences of the current placement: (observation index, reference index, residual).
     let matches = |e: &Iso3| -> Vec<(usize, usize, f64)> {
         obs.iter()
             .enumerate()
@@ -258,6 +380,11 @@ pub fn refine_camera(
                 Some((i, j, reference.normals[j].dot(p - reference.points[j])))
             })
             .collect()
+    };
+    let trimmed = |mut m: Vec<(usize, usize, f64)>| {
+        m.sort_by(|a, b| a.2.abs().total_cmp(&b.2.abs()));
+        m.truncate(((m.len() as f64) * cfg.trim_fraction).ceil() as usize);
+        m
     };
     let rms = |m: &[(usize, usize, f64)]| (m.iter().map(|x| x.2 * x.2).sum::<f64>() / m.len().max(1) as f64).sqrt();
     let first = matches(carm_from_optical);
@@ -271,36 +398,18 @@ pub fn refine_camera(
             min_fraction: cfg.min_overlap_fraction,
         });
     }
-    let rms_before = rms(&first);
+    let rms_before = rms(&trimmed(first));
     let mut e = *carm_from_optical;
     let mut iterations = 0;
-    let h = [1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6];
     for it in 0..cfg.max_iterations {
         iterations = it + 1;
-        let mut m = matches(&e);
+        let m = matches(&e);
         if m.len() < cfg.min_overlap_points {
             break;
         }
-        // Trim: keep the closest fraction.
-        m.sort_by(|a, b| a.2.abs().total_cmp(&b.2.abs()));
-        m.truncate(((m.len() as f64) * cfg.trim_fraction).ceil() as usize);
-
         let (mut ata, mut atb) = ([[0.0; 6]; 6], [0.0; 6]);
-        for &(i, j, r) in &m {
-            let (y, n) = (reference.points[j], reference.normals[j]);
-            let mut jac = [0.0; 6];
-            for k in 0..6 {
-                let mut xp = [0.0; 6];
-                xp[k] = h[k];
-                let mut xm = [0.0; 6];
-                xm[k] = -h[k];
-                let (Some(pp), Some(pm)) =
-                    (obs[i].triangulate(&corrected(&e, &xp), plane), obs[i].triangulate(&corrected(&e, &xm), plane))
-                else {
-                    continue;
-                };
-                jac[k] = (n.dot(pp - y) - n.dot(pm - y)) / (2.0 * h[k]);
-            }
+        for (i, j, r) in trimmed(m) {
+            let Some(jac) = obs[i].jacobian(&e, plane, reference.normals[j]) else { continue };
             let w = if r.abs() <= cfg.huber_m { 1.0 } else { cfg.huber_m / r.abs() };
             for a in 0..6 {
                 for b in 0..6 {
@@ -311,18 +420,15 @@ pub fn refine_camera(
         }
         let x = solve6(ata, atb).ok_or(RefineError::Degenerate)?;
         e = corrected(&e, &x);
-        let rot = Vec3::new(x[0], x[1], x[2]).norm();
-        let tr = Vec3::new(x[3], x[4], x[5]).norm();
         // Converged when a step moves no ray by more than a micrometre at a metre.
-        if rot < 1e-6 && tr < 1e-6 {
+        if Vec3::new(x[0], x[1], x[2]).norm() < 1e-6 && Vec3::new(x[3], x[4], x[5]).norm() < 1e-6 {
             break;
         }
     }
     let last = matches(&e);
-    let mut sorted = last.clone();
-    sorted.sort_by(|a, b| a.2.abs().total_cmp(&b.2.abs()));
-    sorted.truncate(((sorted.len() as f64) * cfg.trim_fraction).ceil() as usize);
-    let rms_after = rms(&sorted);
+    let overlap_fraction = last.len() as f64 / obs.len().max(1) as f64;
+    let overlap = last.len();
+    let rms_after = rms(&trimmed(last));
     let translation_m = e.translation - carm_from_optical.translation;
     let rotation_deg = rotation_angle_deg(&carm_from_optical.rotation, &e.rotation);
     if translation_m.norm() > cfg.max_translation_m || rotation_deg > cfg.max_rotation_deg {
@@ -333,7 +439,7 @@ pub fn refine_camera(
             max_rotation_deg: cfg.max_rotation_deg,
         });
     }
-    if !(rms_after <= cfg.max_rms_m) || last.len() < cfg.min_overlap_points {
+    if !(rms_after <= cfg.max_rms_m) || overlap < cfg.min_overlap_points {
         return Err(RefineError::PoorFit { rms_m: rms_after, iterations, max_rms_m: cfg.max_rms_m });
     }
     Ok(RefineReport {
@@ -343,9 +449,44 @@ pub fn refine_camera(
         iterations,
         rms_before_m: rms_before,
         rms_after_m: rms_after,
-        overlap_fraction: last.len() as f64 / obs.len().max(1) as f64,
+        overlap_fraction,
         points: obs.len(),
     })
+}
+
+/// Refines the placement of the camera whose `grid` (triangulated through `carm_from_optical`)
+/// is given against the `reference` grid of another camera, and on success re-triangulates the
+/// grid's points through the refined placement, in place. Both surfaces are smoothed for the fit
+/// (`smooth_iterations`); the points moved are the ones measured. On refusal the grid is
+/// untouched and the calibrated placement stands.
+pub fn refine_grid(
+    reference: &Grid,
+    grid: &mut Grid,
+    carm_from_optical: &Iso3,
+    plane: &Plane,
+    motion: &ScanMotion,
+    cfg: &RefineConfig,
+) -> Result<RefineReport, RefineError> {
+    let measured =
+        grid_observations(grid.points(), grid.samples(), carm_from_optical, plane, motion, cfg.max_travel_spread_m)?;
+    let mesh_cfg = MeshConfig { smooth_iterations: cfg.smooth_iterations, ..MeshConfig::default() };
+    let mut surface = mesh_grid(reference, &mesh_cfg);
+    surface.compute_normals();
+    let surface = Reference::from_mesh(&surface)?;
+    let smoothed = mesh_grid(grid, &mesh_cfg);
+    let obs: Vec<Observation> =
+        grid_observations(&smoothed.positions, 1, carm_from_optical, plane, motion, f64::INFINITY)?
+            .into_iter()
+            .map(|(_, o)| o)
+            .collect();
+    let report = refine_camera(&surface, &obs, carm_from_optical, plane, cfg)?;
+    let points = grid.points_mut();
+    for (i, o) in measured {
+        points[i] = o
+            .triangulate(&report.carm_from_optical, plane)
+            .map_or([f32::NAN; 3], |p| [p.x as f32, p.y as f32, p.z as f32]);
+    }
+    Ok(report)
 }
 
 #[cfg(test)]
@@ -375,5 +516,59 @@ mod tests {
         assert!(solve6([[0.0; 6]; 6], [1.0; 6]).is_none());
         let r = corrected(&e, &[0.0, 0.0, 0.01, 0.001, 0.0, 0.0]);
         assert!((rotation_angle_deg(&e.rotation, &r.rotation) - 0.01f64.to_degrees()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn jacobian_matches_central_differences() {
+        let e = Iso3::look_at(Vec3::new(0.25, 0.4, 0.8), Vec3::new(0.0, 0.0, 0.05), -Vec3::X).unwrap();
+        let plane = Plane::from_params([0.0, 0.96, 0.28, 0.01]).unwrap();
+        let pose = Iso3 { rotation: Mat3::rot_y(0.2), translation: Vec3::new(0.0, 0.1, -0.02) };
+        let n = Vec3::new(0.3, -0.2, 0.93).try_normalize().unwrap();
+        let ray = Vec3::new(0.05, -0.1, 1.0).try_normalize().unwrap();
+        let o = Observation { ray, table_from_carm: pose };
+        let jac = o.jacobian(&e, &plane, n).unwrap();
+        for k in 0..6 {
+            let h = 1e-6;
+            let (mut xp, mut xm) = ([0.0; 6], [0.0; 6]);
+            xp[k] = h;
+            xm[k] = -h;
+            let pp = o.triangulate(&corrected(&e, &xp), &plane).unwrap();
+            let pm = o.triangulate(&corrected(&e, &xm), &plane).unwrap();
+            let fd = n.dot(pp - pm) / (2.0 * h);
+            assert!((fd - jac[k]).abs() < 1e-6 * (1.0 + fd.abs()), "parameter {k}: {fd} vs {}", jac[k]);
+        }
+    }
+
+    #[test]
+    fn grid_observations_recover_each_frame_and_refuse_a_mixed_one() {
+        let e = Iso3::look_at(Vec3::new(0.25, 0.4, 0.8), Vec3::new(0.0, 0.0, 0.05), -Vec3::X).unwrap();
+        let plane = Plane::from_params([0.0, 0.96, 0.28, 0.01]).unwrap();
+        let motion = ScanMotion { table_from_carm: crate::pose::table_from_carm(0.0, 0.02, 0.1) };
+        // Two frames of three points each, on the laser plane at their travels.
+        let mut pts = Vec::new();
+        for travel in [0.1, 0.13] {
+            let pose = motion.at(travel);
+            for x in [-0.05, 0.0, 0.04] {
+                // A point of the plane in carm: n . q = d, with q.x = x and q.z = 0.02.
+                let q = Vec3::new(x, (0.01 - 0.28 * 0.02) / 0.96, 0.02);
+                let p = pose.transform_point(q);
+                assert!((motion.travel_of(p, &plane).unwrap() - travel).abs() < 1e-12);
+                pts.push([p.x as f32, p.y as f32, p.z as f32]);
+            }
+        }
+        pts.push([f32::NAN; 3]);
+        pts.push([f32::NAN; 3]);
+        pts.push([f32::NAN; 3]);
+        let obs = grid_observations(&pts, 3, &e, &plane, &motion, 1e-4).unwrap();
+        assert_eq!(obs.iter().map(|o| o.0).collect::<Vec<_>>(), [0, 1, 2, 3, 4, 5]);
+        for (i, o) in &obs {
+            let p = o.triangulate(&e, &plane).unwrap();
+            let want = Vec3::new(pts[*i][0].into(), pts[*i][1].into(), pts[*i][2].into());
+            assert!((p - want).norm() < 1e-6, "{i}: {p:?} vs {want:?}");
+        }
+        // A frame whose points lie on two travels' planes.
+        pts.swap(2, 3);
+        let e = grid_observations(&pts, 3, &e, &plane, &motion, 1e-4).unwrap_err();
+        assert!(matches!(e, RefineError::NotOneTravel { frame: 0, .. }), "{e}");
     }
 }

@@ -6,8 +6,8 @@
 use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine};
 use xsurf_core::eval::{accuracy, surface_errors};
 use xsurf_core::geom::{Iso3, Plane, Quat, Vec3};
-use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
-use xsurf_core::register::{refine_camera, Observation, Reference, RefineConfig, RefineError};
+use xsurf_core::mesh::Grid;
+use xsurf_core::register::{refine_camera, refine_grid, Observation, Reference, RefineConfig, RefineError, ScanMotion};
 
 use xsurf_core::rig::Rig;
 use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene};
@@ -60,12 +60,13 @@ fn grid(s: &Scan, ci: usize, carm_from_optical: &Iso3) -> (Grid, Vec<(Vec3, Iso3
     (g, pts)
 }
 
-fn reference(g: &Grid) -> Reference {
-    let mut m = mesh_grid(g, &MeshConfig::default());
-    m.compute_normals();
-    let p: Vec<Vec3> = m.positions.iter().map(|p| Vec3::new(p[0].into(), p[1].into(), p[2].into())).collect();
-    let n: Vec<Vec3> = m.normals.iter().map(|p| Vec3::new(p[0].into(), p[1].into(), p[2].into())).collect();
-    Reference::new(&p, &n).unwrap()
+fn rms_mm(scene: &Scene, pts: &[Vec3]) -> f64 {
+    let p: Vec<[f32; 3]> = pts.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
+    accuracy(surface_errors(scene, &p)).rms_m * 1e3
+}
+
+fn finite(g: &Grid) -> impl Iterator<Item = Vec3> + '_ {
+    g.points().iter().map(|p| Vec3::new(p[0].into(), p[1].into(), p[2].into())).filter(|p| p.is_finite())
 }
 
 fn perturb(e: &Iso3, mm: f64, deg: f64) -> Iso3 {
@@ -75,9 +76,8 @@ fn perturb(e: &Iso3, mm: f64, deg: f64) -> Iso3 {
     Iso3 { rotation: r.mul_mat(&e.rotation), translation: e.translation + dir * (mm * 1e-3) }
 }
 
-fn rms_mm(scene: &Scene, pts: &[Vec3]) -> f64 {
-    let p: Vec<[f32; 3]> = pts.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
-    accuracy(surface_errors(scene, &p)).rms_m * 1e3
+fn placement_error(truth: &Iso3, e: &Iso3) -> (f64, f64) {
+    ((e.translation - truth.translation).norm() * 1e3, truth.rotation.angle_to(&e.rotation).to_degrees())
 }
 
 #[test]
@@ -86,69 +86,61 @@ fn perturbed_second_camera_is_recovered_and_the_merge_is_as_good_as_calibrated()
     let plane = Plane::from_params(s.rig.laser_plane).unwrap();
     let e1 = s.rig.cameras[0].carm_from_optical();
     let e2 = s.rig.cameras[1].carm_from_optical();
-    let (g1, p1) = grid(&s, 0, &e1);
-    let (_, p2_true) = grid(&s, 1, &e2);
-    let reference = reference(&g1);
-    let cam1: Vec<Vec3> = p1.iter().map(|x| x.0).collect();
-    let merged_true: Vec<Vec3> = cam1.iter().copied().chain(p2_true.iter().map(|x| x.0)).collect();
-    let rms_true = rms_mm(&s.scanner.scene, &merged_true);
+    let (g1, _) = grid(&s, 0, &e1);
+    let (g2_true, _) = grid(&s, 1, &e2);
+    let rms_true = rms_mm(&s.scanner.scene, &finite(&g1).chain(finite(&g2_true)).collect::<Vec<_>>());
+    let motion = ScanMotion { table_from_carm: s.lines[1][0].1 };
 
     let bad = perturb(&e2, 2.0, 0.3);
-    let (_, p2_bad) = grid(&s, 1, &bad);
-    let obs: Vec<Observation> = p2_bad.iter().filter_map(|(p, pose)| Observation::from_point(*p, pose, &bad)).collect();
-    let merged_bad: Vec<Vec3> = cam1.iter().copied().chain(p2_bad.iter().map(|x| x.0)).collect();
-    let rms_bad = rms_mm(&s.scanner.scene, &merged_bad);
-
+    let (mut g2, p2_bad) = grid(&s, 1, &bad);
+    let rms_bad = rms_mm(&s.scanner.scene, &finite(&g1).chain(finite(&g2)).collect::<Vec<_>>());
     let t = std::time::Instant::now();
-    let r = refine_camera(&reference, &obs, &bad, &plane, &RefineConfig::default()).unwrap();
+    let cfg = RefineConfig::default();
+    let r = refine_grid(&g1, &mut g2, &bad, &plane, &motion, &cfg).unwrap_or_else(|e| panic!("{e}"));
     let took = t.elapsed();
-    let dt_mm = (r.carm_from_optical.translation - e2.translation).norm() * 1e3;
-    let m = e2.rotation.transpose().mul_mat(&r.carm_from_optical.rotation);
-    let dr_deg = ((m.column(0).x + m.column(1).y + m.column(2).z - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees();
-    let refined: Vec<Vec3> = obs.iter().filter_map(|o| o.triangulate(&r.carm_from_optical, &plane)).collect();
-    let merged_refined: Vec<Vec3> = cam1.iter().copied().chain(refined.iter().copied()).collect();
-    let rms_refined = rms_mm(&s.scanner.scene, &merged_refined);
+    let (dt_mm, dr_deg) = placement_error(&e2, &r.carm_from_optical);
+    let rms_refined = rms_mm(&s.scanner.scene, &finite(&g1).chain(finite(&g2)).collect::<Vec<_>>());
     eprintln!(
-        "refine: {} iterations, {} points, {:?}; residual RMS {:.3} -> {:.3} mm, overlap {:.0} %; \
-         placement error {dt_mm:.3} mm / {dr_deg:.4} deg; merged RMS: calibrated {rms_true:.3}, \
-         perturbed {rms_bad:.3}, refined {rms_refined:.3} mm",
+        "refine: {} iterations, {} points, {took:?}; residual RMS {:.3} -> {:.3} mm, overlap {:.0} %; \
+         placement error {dt_mm:.3} mm / {dr_deg:.4} deg (perturbed 2 mm / 0.3 deg); merged RMS: calibrated \
+         {rms_true:.3}, perturbed {rms_bad:.3}, refined {rms_refined:.3} mm",
         r.iterations,
         r.points,
-        took,
         r.rms_before_m * 1e3,
         r.rms_after_m * 1e3,
         r.overlap_fraction * 100.0
     );
-    eprintln!(
-        "translation error vector (carm) {:?} mm; applied {:?} mm",
-        (r.carm_from_optical.translation - e2.translation) * 1e3,
-        (bad.translation - e2.translation) * 1e3
-    );
     assert!(rms_bad > 1.5 * rms_true, "the perturbation must matter: {rms_bad} vs {rms_true}");
-    // The merge is as good as with the true calibration (the issue's bound: within 10 %).
+    // The issue's bounds: the merge within 10 % of the calibrated one, the placement within
+    // 0.3 mm and 0.05 degrees of the truth.
     assert!(rms_refined <= 1.1 * rms_true, "merged RMS {rms_refined} vs calibrated {rms_true}");
-    // The placement itself: the issue asks 0.3 mm / 0.05 deg, not reached yet. The cost's minimum
-    // lies ~1 mm / 0.06 deg from the truth even when started at the truth: the laser-line points
-    // form a small planar target seen with a narrow field of view, so a sideways shift and a
-    // turn of the camera nearly cancel, and the cameras' own systematic line-centre errors pick
-    // the point along that valley. Guarded here so it does not get worse.
-    assert!(dt_mm < 1.5, "translation error {dt_mm} mm");
-    assert!(dr_deg < 0.1, "rotation error {dr_deg} deg");
+    assert!(dt_mm < 0.3, "translation error {dt_mm} mm");
+    assert!(dr_deg < 0.05, "rotation error {dr_deg} deg");
+    // Every measured point was moved, none lost.
+    assert_eq!(g2.valid(), g2_true.valid());
 
-    // Refusals: no overlap (the reference elsewhere), a wildly wrong start.
+    // Refusals leave the grid as it was: no overlap (the reference elsewhere) ...
+    let obs: Vec<Observation> = p2_bad.iter().filter_map(|(p, pose)| Observation::from_point(*p, pose, &bad)).collect();
+    let cam1: Vec<Vec3> = finite(&g1).collect();
     let far: Vec<Vec3> = cam1.iter().map(|p| *p + Vec3::new(0.0, 1.0, 0.0)).collect();
     let far_ref = Reference::new(&far, &vec![Vec3::Z; far.len()]).unwrap();
-    let e = refine_camera(&far_ref, &obs, &bad, &plane, &RefineConfig::default()).unwrap_err();
+    let e = refine_camera(&far_ref, &obs, &bad, &plane, &cfg).unwrap_err();
     assert!(matches!(e, RefineError::TooLittleOverlap { .. }), "{e}");
-    // A correction beyond the bounds is refused (the 2 mm perturbation against a 0.5 mm bound).
+    let (mut g2, _) = grid(&s, 1, &bad);
+    let before = g2.clone();
+    let mut shifted = g1.clone();
+    shifted.points_mut().iter_mut().for_each(|p| p[1] += 1.0);
+    let e = refine_grid(&shifted, &mut g2, &bad, &plane, &motion, &cfg).unwrap_err();
+    assert!(matches!(e, RefineError::TooLittleOverlap { .. }), "{e}");
+    assert!(g2.points().iter().zip(before.points()).all(|(a, b)| a == b || (a[0].is_nan() && b[0].is_nan())));
+    // ... a correction beyond the bounds (the 2 mm perturbation against a 0.5 mm bound) ...
     let tight = RefineConfig { max_translation_m: 0.0005, ..Default::default() };
-    let e = refine_camera(&reference, &obs, &bad, &plane, &tight).unwrap_err();
+    let e = refine_grid(&g1, &mut g2, &bad, &plane, &motion, &tight).unwrap_err();
     assert!(matches!(e, RefineError::MovedTooFar { .. }), "{e}");
-    // The camera's rays as observed, but a start 30 mm and 5 degrees from the truth.
-    let obs_true: Vec<Observation> =
-        p2_true.iter().filter_map(|(p, pose)| Observation::from_point(*p, pose, &e2)).collect();
+    // ... and a wildly wrong calibration: the camera placed 30 mm and 5 degrees off.
     let wild = perturb(&e2, 30.0, 5.0);
-    let e = refine_camera(&reference, &obs_true, &wild, &plane, &RefineConfig::default()).unwrap_err();
+    let (mut g2, _) = grid(&s, 1, &wild);
+    let e = refine_grid(&g1, &mut g2, &wild, &plane, &motion, &cfg).unwrap_err();
     eprintln!("wild start refused: {e}");
     assert!(matches!(
         e,
