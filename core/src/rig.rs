@@ -55,6 +55,12 @@ impl RigCamera {
         let [x, y, z, w] = self.rotation;
         Iso3::from_parts(Vec3::from_array(self.translation), Quat { x, y, z, w })
     }
+    /// Sets `carm -> optical` (a refined placement).
+    pub fn set_carm_from_optical(&mut self, e: &Iso3) {
+        let q = e.quaternion();
+        self.translation = e.translation.to_array();
+        self.rotation = [q.x, q.y, q.z, q.w];
+    }
     /// Intrinsics and extrinsics together.
     pub fn geometry(&self) -> Result<CameraGeometry, CameraError> {
         Ok(CameraGeometry { model: self.model()?, carm_from_optical: self.carm_from_optical() })

@@ -2,8 +2,16 @@
 //! one surface in `table` (`/surface/cloud`, `/surface/mesh`) after each END, and the files
 //! `<output_dir>/scan_<id>/{merged.ply, scene.wrl, scene.glb, preview.png}`.
 //!
-//! The cameras are placed by calibration (their clouds are already in `table`). Where they
-//! overlap, each region is kept from the camera that sees it better (brighter line) and the
+//! The cameras are placed by calibration (their clouds are already in `table`). With `refine`,
+//! each further camera's placement (`carm -> <cam>_optical_frame` from `/tf_static`) is then
+//! refined against the first camera's surface (`core/src/register.rs`: each point's frame
+//! pose follows from its travel, `table -> carm` from `/tf` gives the angle and tabletop
+//! height; point-to-plane Gauss-Newton on smoothed surfaces, trimmed and robust), its points are
+//! re-triangulated through the refined placement, the placements are published on
+//! `/surface/placements` and, with `save_rig_file`, written into that rig file for the next
+//! scans. A refinement that is refused (too little overlap, a poor fit, a correction beyond
+//! the bounds) is logged with its reason and counted; the calibrated placement then stands.
+//! Where the cameras overlap, each region is kept from the camera that sees it better (brighter line) and the
 //! other camera's samples there are averaged into it (`fuse_distance_m`, `core/src/fuse.rs`), so
 //! the merged surface is one layer; then each grid is meshed and the surfaces are combined. The merge waits `merge_delay_s` after END so the
 //! meshers' final clouds arrive first. The radiograph placed by `xray_aligner`
@@ -13,14 +21,18 @@
 
 use super::decl;
 use crate::convert;
+use crate::tf::TfBuffer;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 use xsurf_core::fuse::{one_surface, FuseConfig};
+use xsurf_core::geom::{Iso3, Plane};
 use xsurf_core::mesh::{mesh_grid, Grid, Mesh, MeshConfig};
+use xsurf_core::register::{refine_grid, RefineConfig, RefineReport, ScanMotion};
 use xsurf_formats::scene::{Scene, Surface, TexturedPlane};
 use xsurf_msgs::pointcloud;
 use xsurf_msgs::sensor_msgs::PointCloud2;
+use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
@@ -52,6 +64,42 @@ pub fn declarations() -> Vec<ParamDecl> {
             "where cameras overlap, samples of different cameras closer than this are one observation: the \
              region's better-lit camera keeps it, averaged with the other's (0: keep both layers)",
         ),
+        decl(
+            "refine",
+            V::Bool(true),
+            "",
+            "refine each further camera's placement against the first camera's surface (false: calibration only)",
+        ),
+        decl(
+            "laser_plane",
+            V::DoubleArray(vec![0.0, 1.0, 0.0, 0.0]),
+            "m",
+            "the laser plane in carm, [nx, ny, nz, d], as the triangulators have it (the refinement re-triangulates)",
+        ),
+        decl(
+            "refine_max_translation_m",
+            V::Double(RefineConfig::default().max_translation_m),
+            "m",
+            "a refinement that moves a camera further than this is refused",
+        ),
+        decl(
+            "refine_max_rotation_deg",
+            V::Double(RefineConfig::default().max_rotation_deg),
+            "deg",
+            "a refinement that turns a camera further than this is refused",
+        ),
+        decl(
+            "refine_max_rms_m",
+            V::Double(RefineConfig::default().max_rms_m),
+            "m",
+            "a refinement whose RMS point-to-plane residual stays above this is refused",
+        ),
+        decl(
+            "save_rig_file",
+            V::String(String::new()),
+            "",
+            "if set, each refined placement is written into this rig file (atomically), for the next scans",
+        ),
         decl("transparency", V::Double(0.3), "", "surface transparency in the VRML and glTF scenes, 0..1"),
         decl(
             "output_dir",
@@ -72,6 +120,8 @@ pub fn declarations() -> Vec<ParamDecl> {
 
 struct Config {
     cameras: Vec<String>,
+    refine: Option<(RefineConfig, Plane)>,
+    save_rig_file: Option<PathBuf>,
     delay_ns: i64,
     mesh: MeshConfig,
     fuse: FuseConfig,
@@ -105,7 +155,29 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         return Err(Params::invalid("transparency", format!("{transparency} is not in [0, 1]")));
     }
     let dir = p.string("output_dir")?;
+    let plane = p.f64_array("laser_plane")?;
+    let plane = <[f64; 4]>::try_from(plane.as_slice())
+        .ok()
+        .and_then(Plane::from_params)
+        .ok_or_else(|| Params::invalid("laser_plane", format!("{plane:?}: needs [nx, ny, nz, d] with |n| = 1")))?;
+    let positive = |name: &str| -> Result<f64, ParamError> {
+        let v = p.f64(name)?;
+        if v > 0.0 && v.is_finite() {
+            Ok(v)
+        } else {
+            Err(Params::invalid(name, format!("{v} must be positive")))
+        }
+    };
+    let refine_cfg = RefineConfig {
+        max_translation_m: positive("refine_max_translation_m")?,
+        max_rotation_deg: positive("refine_max_rotation_deg")?,
+        max_rms_m: positive("refine_max_rms_m")?,
+        ..RefineConfig::default()
+    };
+    let save = p.string("save_rig_file")?;
     Ok(Config {
+        refine: p.bool("refine")?.then_some((refine_cfg, plane)),
+        save_rig_file: (!save.is_empty()).then(|| PathBuf::from(save)),
         cameras,
         delay_ns: (delay * 1e9) as i64,
         mesh,
@@ -142,6 +214,13 @@ pub struct MergerNode {
     merged_current: bool,
     bad_overlays: u64,
     fused_dropped: u64,
+    refinements: u64,
+    refinements_refused: u64,
+    /// `carm -> <cam>_optical_frame` from `/tf_static`.
+    statics: TfBuffer,
+    /// The scan's C-arm motion: its first `table -> carm` and the largest change of angle
+    /// (rad) and of the across / height offsets (m) since.
+    motion: Option<(Iso3, f64, f64)>,
     /// The last merge's cloud and mesh, published again between scans.
     last_outputs: super::Republisher,
 }
@@ -163,6 +242,10 @@ impl MergerNode {
             merged_current: false,
             bad_overlays: 0,
             fused_dropped: 0,
+            refinements: 0,
+            refinements_refused: 0,
+            statics: TfBuffer::new("table", "carm", 0),
+            motion: None,
             last_outputs: super::Republisher::default(),
         })
     }
@@ -185,6 +268,17 @@ impl MergerNode {
             }
         }
         let (names, mut gs): (Vec<String>, Vec<Grid>) = grids.into_iter().unzip();
+        let refined = self.refine(&names, &mut gs);
+        if !refined.is_empty() {
+            let placements = TFMessage {
+                transforms: refined
+                    .iter()
+                    .map(|(name, e)| convert::transform_stamped(stamp, "carm", &format!("{name}_optical_frame"), e))
+                    .collect(),
+            };
+            out.publish(2, Msg::Tf(Arc::new(placements)));
+            self.save_rig(&refined);
+        }
         let fused = one_surface(&mut gs, &self.cfg.fuse);
         self.fused_dropped += fused.dropped.iter().sum::<usize>() as u64;
         let meshes: Vec<(String, Mesh)> =
@@ -225,6 +319,84 @@ impl MergerNode {
         self.merged_current = true;
     }
 
+    /// Refines each further camera's placement against the first camera's grid; returns the
+    /// placements refined. Refusals are logged and counted.
+    fn refine(&mut self, names: &[String], grids: &mut [Grid]) -> Vec<(String, Iso3)> {
+        let Some((cfg, plane)) = self.cfg.refine else { return Vec::new() };
+        if grids.len() < 2 {
+            return Vec::new();
+        }
+        let scan = self.scan_id;
+        let mut refuse = |cam: &str, why: String| {
+            self.refinements_refused += 1;
+            log::warn!("merger: scan {scan}: {cam} keeps its calibrated placement: {why}");
+        };
+        let motion = match self.motion {
+            None => {
+                refuse(&names[1..].join(", "), "no table -> carm on /tf during the scan".into());
+                return Vec::new();
+            }
+            Some((_, angle, offset)) if angle > MAX_ANGLE_CHANGE_RAD || offset > MAX_OFFSET_CHANGE_M => {
+                refuse(
+                    &names[1..].join(", "),
+                    format!(
+                        "the C-arm turned {:.3} deg or the tabletop moved {:.1} mm during the scan; the refinement                          needs one angle and height per scan",
+                        angle.to_degrees(),
+                        offset * 1e3
+                    ),
+                );
+                return Vec::new();
+            }
+            Some((pose, _, _)) => ScanMotion { table_from_carm: pose },
+        };
+        let (first, rest) = grids.split_at_mut(1);
+        let mut refined = Vec::new();
+        for (name, grid) in names[1..].iter().zip(rest) {
+            let frame = format!("{name}_optical_frame");
+            let Some(e) = self.statics.carm_from(&frame) else {
+                refuse(name, format!("no carm -> {frame} on /tf_static"));
+                continue;
+            };
+            match refine_grid(&first[0], grid, &e, &plane, &motion, &cfg) {
+                Ok(r) => {
+                    log_refinement(scan, name, &names[0], &r);
+                    self.refinements += 1;
+                    refined.push((name.clone(), r.carm_from_optical));
+                }
+                Err(err) => refuse(name, err.to_string()),
+            }
+        }
+        refined
+    }
+
+    /// Writes refined placements into `save_rig_file`.
+    fn save_rig(&self, refined: &[(String, Iso3)]) {
+        let Some(path) = &self.cfg.save_rig_file else { return };
+        let result = (|| -> anyhow::Result<()> {
+            let mut rig = xsurf_formats::rig::read(path)?;
+            for (name, e) in refined {
+                let cam = rig
+                    .cameras
+                    .iter_mut()
+                    .find(|c| &c.name == name)
+                    .ok_or_else(|| anyhow::anyhow!("the rig file has no camera {name:?}"))?;
+                cam.set_carm_from_optical(e);
+            }
+            let header = format!(
+                "# Rig file; the placement of {} refined by the merger against {} on scan {}.",
+                refined.iter().map(|r| r.0.as_str()).collect::<Vec<_>>().join(", "),
+                self.cfg.cameras[0],
+                self.scan_id
+            );
+            xsurf_formats::rig::write(path, &rig, &header)?;
+            Ok(())
+        })();
+        match result {
+            Ok(()) => log::info!("merger: refined placement saved to {}", path.display()),
+            Err(e) => log::error!("merger: save_rig_file {}: {e:#}", path.display()),
+        }
+    }
+
     fn write(&self, scan_id: u32, merged: &Mesh, meshes: &[(String, Mesh)]) {
         if let Some(dir) = &self.cfg.output_dir {
             let dir = dir.join(format!("scan_{scan_id}"));
@@ -253,6 +425,25 @@ impl MergerNode {
         }
         Ok(())
     }
+}
+
+/// Largest change of the C-arm angle during a scan for the refinement to run, radians.
+const MAX_ANGLE_CHANGE_RAD: f64 = 1e-4;
+/// Largest change of the C-arm's across / height offset during a scan, metres.
+const MAX_OFFSET_CHANGE_M: f64 = 1e-4;
+
+fn log_refinement(scan: u32, name: &str, reference: &str, r: &RefineReport) {
+    log::info!(
+        "merger: scan {scan}: {name} refined against {reference}: moved {:.2} mm / {:.3} deg, {} iterations, \
+         RMS {:.3} -> {:.3} mm over {} points, overlap {:.0} %",
+        r.translation_m.norm() * 1e3,
+        r.rotation_deg,
+        r.iterations,
+        r.rms_before_m * 1e3,
+        r.rms_after_m * 1e3,
+        r.points,
+        r.overlap_fraction * 100.0
+    );
 }
 
 /// The radiograph plane from an `/xray/overlay` marker: its triangles, its uv (rviz2's v = 0 at
@@ -313,12 +504,15 @@ impl Component for MergerNode {
             .collect();
         v.push(Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable));
         v.push(Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::Reliable));
+        v.push(Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable));
+        v.push(Port::new("/tf_static", TFMessage::TYPE_NAME, QosClass::Static));
         v
     }
     fn outputs(&self) -> Vec<Port> {
         vec![
             Port::new("/surface/cloud", PointCloud2::TYPE_NAME, QosClass::Reliable),
             Port::new("/surface/mesh", Marker::TYPE_NAME, QosClass::Reliable),
+            Port::new("/surface/placements", TFMessage::TYPE_NAME, QosClass::Reliable),
         ]
     }
     fn declarations(&self) -> Vec<ParamDecl> {
@@ -348,6 +542,7 @@ impl Component for MergerNode {
                         }
                         self.last_outputs.clear();
                         self.clouds.clear();
+                        self.motion = None;
                         self.scan_id = e.scan_id;
                     }
                     ScanEvent::END => {
@@ -362,6 +557,30 @@ impl Component for MergerNode {
                 Ok(())
             }
             (i, Msg::Marker(m)) if i == n + 1 => self.overlay(m),
+            (i, Msg::Tf(t)) if i == n + 2 => {
+                for t in t.transforms.iter().filter(|t| {
+                    t.header.frame_id.trim_start_matches('/') == self.cfg.frame_id
+                        && t.child_frame_id.trim_start_matches('/') == "carm"
+                }) {
+                    let pose = convert::iso(&t.transform);
+                    self.motion = Some(match self.motion {
+                        None => (pose, 0.0, 0.0),
+                        Some((first, angle, offset)) => {
+                            let d = pose.translation - first.translation;
+                            (
+                                first,
+                                angle.max(first.rotation.angle_to(&pose.rotation)),
+                                offset.max(d.x.abs()).max(d.z.abs()),
+                            )
+                        }
+                    });
+                }
+                Ok(())
+            }
+            (i, Msg::Tf(t)) if i == n + 3 => {
+                self.statics.add_static(t);
+                Ok(())
+            }
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
         }
     }
@@ -384,6 +603,8 @@ impl Component for MergerNode {
             ("bad_clouds", self.bad_clouds),
             ("bad_overlays", self.bad_overlays),
             ("fused_dropped", self.fused_dropped),
+            ("refinements", self.refinements),
+            ("refinements_refused", self.refinements_refused),
         ]
     }
 }
