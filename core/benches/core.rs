@@ -136,9 +136,24 @@ fn merging(c: &mut Criterion) {
         merged
     };
     g.bench_function("fuse_mesh_combine", |bch| bch.iter(|| merge(Some(FuseConfig::default()))));
+    // The second camera's placement refined against the first before fusing (the merger's
+    // default): a camera above the scene, the laser plane y = travel in carm.
+    let cam = Iso3::look_at(Vec3::new(0.25, 0.4, 0.8), Vec3::new(0.0, 0.0, 0.05), -Vec3::X).unwrap();
+    let plane = Plane::from_params([0.0, 1.0, 0.0, 0.0]).unwrap();
+    let motion = ScanMotion { table_from_carm: Iso3::IDENTITY };
+    g.bench_function("refine_only", |bch| {
+        bch.iter(|| {
+            let mut second = b.clone();
+            refine_grid(&a, &mut second, &cam, &plane, &motion, &RefineConfig::default()).unwrap();
+            second
+        })
+    });
     g.bench_function("mesh_combine_no_fuse", |bch| bch.iter(|| merge(None)));
     g.finish();
 }
+
+use xsurf_core::geom::{Iso3, Plane, Vec3};
+use xsurf_core::register::{refine_grid, RefineConfig, ScanMotion};
 
 criterion_group!(benches, edge_detection, triangulation, meshing, merging);
 criterion_main!(benches);
