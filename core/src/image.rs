@@ -208,6 +208,53 @@ impl Image {
     }
 }
 
+/// A sample type [`gaussian_blur`] works in.
+pub(crate) trait BlurSample:
+    Copy + Default + std::ops::Add<Output = Self> + std::ops::Mul<Output = Self>
+{
+    /// The value nearest to `v`.
+    fn from_f64(v: f64) -> Self;
+}
+
+impl BlurSample for f32 {
+    fn from_f64(v: f64) -> Self {
+        v as f32
+    }
+}
+
+impl BlurSample for f64 {
+    fn from_f64(v: f64) -> Self {
+        v
+    }
+}
+
+/// Separable Gaussian blur of a row-major `w x h` buffer (kernel radius `3 sigma`, edges
+/// clamped).
+pub(crate) fn gaussian_blur<T: BlurSample>(src: &[T], w: usize, h: usize, sigma: f64) -> Vec<T> {
+    let r = (3.0 * sigma).ceil() as isize;
+    let k: Vec<f64> = (-r..=r).map(|i| (-((i * i) as f64) / (2.0 * sigma * sigma)).exp()).collect();
+    let sum: f64 = k.iter().sum();
+    let k: Vec<T> = k.iter().map(|v| T::from_f64(v / sum)).collect();
+    let (wi, hi) = (w as isize, h as isize);
+    let pass = |src: &[T], horizontal: bool| {
+        let mut out = vec![T::default(); src.len()];
+        for y in 0..hi {
+            for x in 0..wi {
+                let mut acc = T::default();
+                for (i, &kv) in k.iter().enumerate() {
+                    let o = i as isize - r;
+                    let (xx, yy) =
+                        if horizontal { ((x + o).clamp(0, wi - 1), y) } else { (x, (y + o).clamp(0, hi - 1)) };
+                    acc = acc + kv * src[(yy * wi + xx) as usize];
+                }
+                out[(y * wi + x) as usize] = acc;
+            }
+        }
+        out
+    };
+    pass(&pass(src, true), false)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -32,17 +32,19 @@ impl Observation {
         Some(Self { ray: q.try_normalize()?, table_from_carm: *table_from_carm })
     }
 
+    /// The ray in `carm` through the placement `carm_from_optical`, the plane's normal along it
+    /// and the distance to the laser plane along it; `None` for a ray parallel to the plane.
+    fn ray_to_plane(&self, carm_from_optical: &Iso3, plane: &Plane) -> Option<(Vec3, f64, f64)> {
+        let d = carm_from_optical.transform_vector(self.ray);
+        let den = plane.normal.dot(d);
+        (den.abs() >= 1e-12).then(|| (d, den, (plane.d - plane.normal.dot(carm_from_optical.translation)) / den))
+    }
+
     /// The point in `table` through the placement `carm_from_optical` and the laser plane (in
     /// `carm`); `None` for a ray parallel to the plane or meeting it behind the camera.
     pub fn triangulate(&self, carm_from_optical: &Iso3, plane: &Plane) -> Option<Vec3> {
-        let o = carm_from_optical.translation;
-        let d = carm_from_optical.transform_vector(self.ray);
-        let den = plane.normal.dot(d);
-        if den.abs() < 1e-12 {
-            return None;
-        }
-        let t = (plane.d - plane.normal.dot(o)) / den;
-        (t > 0.0).then(|| self.table_from_carm.transform_point(o + d * t))
+        let (d, _, t) = self.ray_to_plane(carm_from_optical, plane)?;
+        (t > 0.0).then(|| self.table_from_carm.transform_point(carm_from_optical.translation + d * t))
     }
 
     /// The derivatives of `normal . p` (`normal` in `table`, `p` the triangulated point) with
@@ -50,13 +52,7 @@ impl Observation {
     /// the ray turns by `w x d` and the centre moves by `t`, and the point slides along the ray
     /// to stay on the laser plane.
     fn jacobian(&self, carm_from_optical: &Iso3, plane: &Plane, normal: Vec3) -> Option<[f64; 6]> {
-        let o = carm_from_optical.translation;
-        let d = carm_from_optical.transform_vector(self.ray);
-        let den = plane.normal.dot(d);
-        if den.abs() < 1e-12 {
-            return None;
-        }
-        let s = (plane.d - plane.normal.dot(o)) / den;
+        let (d, den, s) = self.ray_to_plane(carm_from_optical, plane)?;
         let g = self.table_from_carm.rotation.transpose().mul_vec(normal);
         let g = g - plane.normal * (g.dot(d) / den);
         let w = d.cross(g) * s;

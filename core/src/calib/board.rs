@@ -175,34 +175,7 @@ impl Grey {
         top * (1.0 - fy) + bottom * fy
     }
     fn blurred(&self, sigma: f64) -> Grey {
-        let r = (3.0 * sigma).ceil() as isize;
-        let k: Vec<f32> = (-r..=r).map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp() as f32).collect();
-        let sum: f32 = k.iter().sum();
-        let k: Vec<f32> = k.iter().map(|v| v / sum).collect();
-        let (w, h) = (self.w as isize, self.h as isize);
-        let mut tmp = vec![0.0f32; self.data.len()];
-        for y in 0..h {
-            for x in 0..w {
-                let mut acc = 0.0;
-                for (i, kv) in k.iter().enumerate() {
-                    let xx = (x + i as isize - r).clamp(0, w - 1);
-                    acc += kv * self.data[(y * w + xx) as usize];
-                }
-                tmp[(y * w + x) as usize] = acc;
-            }
-        }
-        let mut out = vec![0.0f32; self.data.len()];
-        for y in 0..h {
-            for x in 0..w {
-                let mut acc = 0.0;
-                for (i, kv) in k.iter().enumerate() {
-                    let yy = (y + i as isize - r).clamp(0, h - 1);
-                    acc += kv * tmp[(yy * w + x) as usize];
-                }
-                out[(y * w + x) as usize] = acc;
-            }
-        }
-        Grey { w: self.w, h: self.h, data: out }
+        Grey { w: self.w, h: self.h, data: crate::image::gaussian_blur(&self.data, self.w, self.h, sigma) }
     }
     fn percentile(&self, q: f64) -> f64 {
         percentile(self.data.iter().map(|&v| f64::from(v)).collect(), q)

@@ -151,7 +151,7 @@ pub fn render_board(
         }
     });
     if exposure.blur_px > 0.0 {
-        lin = blur(&lin, w, h, exposure.blur_px);
+        lin = crate::image::gaussian_blur(&lin, w, h, exposure.blur_px);
     }
     let mut rng = SplitMix::new(seed ^ 0xB0A4_D000);
     let mut img = Image::new(w as u32, h as u32, Encoding::Mono8);
@@ -159,32 +159,6 @@ pub fn render_board(
         *o = (v + exposure.noise_sigma * rng.normal()).round().clamp(0.0, 255.0) as u8;
     }
     img
-}
-
-fn blur(src: &[f64], w: usize, h: usize, sigma: f64) -> Vec<f64> {
-    let r = (3.0 * sigma).ceil() as isize;
-    let k: Vec<f64> = (-r..=r).map(|i| (-((i * i) as f64) / (2.0 * sigma * sigma)).exp()).collect();
-    let sum: f64 = k.iter().sum();
-    let pass = |src: &[f64], horizontal: bool| {
-        let mut out = vec![0.0; src.len()];
-        for y in 0..h as isize {
-            for x in 0..w as isize {
-                let mut acc = 0.0;
-                for (i, kv) in k.iter().enumerate() {
-                    let o = i as isize - r;
-                    let (xx, yy) = if horizontal {
-                        ((x + o).clamp(0, w as isize - 1), y)
-                    } else {
-                        (x, (y + o).clamp(0, h as isize - 1))
-                    };
-                    acc += kv * src[(yy * w as isize + xx) as usize];
-                }
-                out[(y * w as isize + x) as usize] = acc / sum;
-            }
-        }
-        out
-    };
-    pass(&pass(src, true), false)
 }
 
 /// The board's printed area (squares plus half the border) as four corners in the board frame.

@@ -383,7 +383,7 @@ impl MergerNode {
                 cam.set_carm_from_optical(e);
             }
             let header = format!(
-                "# Rig file; the placement of {} refined by the merger against {} on scan {}.",
+                "xsurf rig file (see launch-config/rig_study.yaml); the placement of {} refined by the merger against {} on scan {}.",
                 refined.iter().map(|r| r.0.as_str()).collect::<Vec<_>>().join(", "),
                 self.cfg.cameras[0],
                 self.scan_id
