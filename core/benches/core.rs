@@ -148,6 +148,18 @@ fn merging(c: &mut Criterion) {
             second
         })
     });
+    // The merger's whole job with its defaults: refine, fuse, mesh both, combine.
+    g.bench_function("refine_fuse_mesh_combine", |bch| {
+        bch.iter(|| {
+            let mut grids = [a.clone(), b.clone()];
+            let (first, second) = grids.split_at_mut(1);
+            refine_grid(&first[0], &mut second[0], &cam, &plane, &motion, &RefineConfig::default()).unwrap();
+            one_surface(&mut grids, &FuseConfig::default());
+            let mut merged = mesh_grid(&grids[0], &MeshConfig::default());
+            merged.append(&mesh_grid(&grids[1], &MeshConfig::default()));
+            merged
+        })
+    });
     g.bench_function("mesh_combine_no_fuse", |bch| bch.iter(|| merge(None)));
     g.finish();
 }

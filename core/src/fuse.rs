@@ -7,6 +7,7 @@
 //! regions rather than from sample to sample. After fusing, no two samples of different cameras
 //! are closer than `min_distance_m`.
 
+use crate::cells::Cells;
 use crate::mesh::Grid;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 
@@ -74,29 +75,26 @@ pub fn one_surface(grids: &mut [Grid], cfg: &FuseConfig) -> FuseReport {
     if !(cfg.min_distance_m > 0.0) {
         return report;
     }
-    let r2 = cfg.min_distance_m * cfg.min_distance_m;
+    let mut near: Vec<(f32, usize)> = Vec::new();
     let qual: Vec<Vec<f32>> = grids.iter().map(|g| quality(g, cfg.quality_radius)).collect();
     for j in 1..grids.len() {
         for i in 0..j {
             // Index grid i; walk grid j's samples.
             let (lo, hi) = grids.split_at_mut(j);
             let (gi, gj) = (&mut lo[i], &mut hi[0]);
-            let idx: Vec<usize> = (0..gi.points().len()).filter(|&k| gi.points()[k][0].is_finite()).collect();
-            if idx.is_empty() {
-                continue;
-            }
-            let entries: Vec<[f32; 3]> = idx.iter().map(|&k| gi.points()[k]).collect();
-            let Ok(tree) = ImmutableKdTree::<f32, 3>::new_from_slice(&entries) else { continue };
+            let cells = Cells::new(gi.points(), cfg.min_distance_m);
             for b in 0..gj.points().len() {
                 let pb = gj.points()[b];
                 if !pb.iter().all(|v| v.is_finite()) {
                     continue;
                 }
-                let near = tree.query(&pb).within::<SquaredEuclidean<f32>>(r2).execute();
+                // Grid i's samples within the distance, nearest first.
+                near.clear();
+                cells.within(&pb, cfg.min_distance_m, |a, d2| near.push((d2, a as usize)));
+                near.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
                 let (mut acc, mut wsum) = ([0.0f32; 3], 0.0f32);
                 let mut b_dropped = false;
-                for nn in near {
-                    let a = idx[nn.item as usize];
+                for &(_, a) in &near {
                     let pa = gi.points()[a];
                     if !pa[0].is_finite() {
                         continue; // dropped earlier
@@ -139,21 +137,15 @@ pub fn one_surface(grids: &mut [Grid], cfg: &FuseConfig) -> FuseReport {
         for i in 0..j {
             let (lo, hi) = grids.split_at_mut(j);
             let (gi, gj) = (&mut lo[i], &mut hi[0]);
-            let idx: Vec<usize> = (0..gi.points().len()).filter(|&k| gi.points()[k][0].is_finite()).collect();
-            let entries: Vec<[f32; 3]> = idx.iter().map(|&k| gi.points()[k]).collect();
-            let Ok(tree) = ImmutableKdTree::<f32, 3>::new_from_slice(&entries) else { continue };
+            let cells = Cells::new(gi.points(), cfg.min_distance_m);
             for b in 0..gj.points().len() {
                 let pb = gj.points()[b];
                 if !pb[0].is_finite() {
                     continue;
                 }
-                if tree
-                    .query(&pb)
-                    .within::<SquaredEuclidean<f32>>(r2)
-                    .execute()
-                    .iter()
-                    .any(|nn| gi.points()[idx[nn.item as usize]][0].is_finite())
-                {
+                let mut close = false;
+                cells.within(&pb, cfg.min_distance_m, |_, _| close = true);
+                if close {
                     gj.points_mut()[b] = [f32::NAN; 3];
                     report.dropped[j] += 1;
                 }

@@ -30,6 +30,7 @@
 
 pub mod calib;
 pub mod camera;
+mod cells;
 pub mod edge;
 pub mod eval;
 pub mod fuse;

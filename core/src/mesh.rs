@@ -7,7 +7,6 @@
 
 use crate::triangulate::Profile;
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
 
 /// The organized point grid of one camera for one scan: column `c` is frame `c`.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -90,6 +89,33 @@ impl Grid {
     /// Number of finite points.
     pub fn valid(&self) -> usize {
         self.points.iter().filter(|p| p[0].is_finite()).count()
+    }
+
+    /// The points after `iterations` passes of Laplacian smoothing on the grid itself, and the
+    /// indices of the interior points: those whose four grid neighbours are all present and
+    /// within `max_edge_m`. An interior point moves `lambda` of the way to their mean on each
+    /// pass; every other point (an edge of the scan, a hole's rim, a jump) stays. The mesh-free
+    /// counterpart of [`Mesh::smooth`], for when only the points are needed.
+    pub fn smoothed_points(&self, iterations: u32, lambda: f32, max_edge_m: f32) -> (Vec<[f32; 3]>, Vec<usize>) {
+        let (ns, nf) = (self.samples, self.frames());
+        let mut cur = self.points.clone();
+        if ns < 3 || nf < 3 {
+            return (cur, Vec::new());
+        }
+        let interior: Vec<usize> = (1..nf - 1)
+            .flat_map(|f| (1..ns - 1).map(move |s| f * ns + s))
+            .filter(|&i| [i - 1, i + 1, i - ns, i + ns].iter().all(|&j| dist(cur[i], cur[j]) <= max_edge_m))
+            .collect();
+        let mut next = cur.clone();
+        for _ in 0..iterations {
+            for &i in &interior {
+                let (p, a, b, c, d) = (cur[i], cur[i - 1], cur[i + 1], cur[i - ns], cur[i + ns]);
+                next[i] = [0, 1, 2].map(|k| p[k] + lambda * ((a[k] + b[k] + c[k] + d[k]) / 4.0 - p[k]));
+            }
+            // Only interior points are written, and they all are on every pass.
+            std::mem::swap(&mut cur, &mut next);
+        }
+        (cur, interior)
     }
 
     /// Fills isolated single missing points (along a frame or across frames) by averaging the two
@@ -287,42 +313,53 @@ impl Mesh {
             return;
         }
         let n = self.positions.len();
-        let mut edge_use: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 2);
-        for t in &self.triangles {
-            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-                *edge_use.entry((a.min(b), a.max(b))).or_insert(0) += 1;
-            }
-        }
-        let mut boundary = vec![false; n];
-        let mut degree = vec![0u32; n];
-        for (&(a, b), &c) in &edge_use {
-            if c == 1 {
-                boundary[a as usize] = true;
-                boundary[b as usize] = true;
-            }
-            degree[a as usize] += 1;
-            degree[b as usize] += 1;
-        }
-        // Compressed adjacency.
+        // Each triangle lists, for each corner, the two other corners: a vertex's list then holds
+        // a neighbour once per triangle on their shared edge, so a neighbour listed once marks a
+        // boundary edge (no hash map: this runs on every merge).
         let mut start = vec![0usize; n + 1];
+        for t in &self.triangles {
+            for &v in t {
+                start[v as usize + 1] += 2;
+            }
+        }
         for i in 0..n {
-            start[i + 1] = start[i] + degree[i] as usize;
+            start[i + 1] += start[i];
         }
         let mut fill = start.clone();
-        let mut adj = vec![0u32; start[n]];
-        for &(a, b) in edge_use.keys() {
-            adj[fill[a as usize]] = b;
-            fill[a as usize] += 1;
-            adj[fill[b as usize]] = a;
-            fill[b as usize] += 1;
+        let mut listed = vec![0u32; start[n]];
+        for t in &self.triangles {
+            for k in 0..3 {
+                let a = t[k] as usize;
+                listed[fill[a]] = t[(k + 1) % 3];
+                listed[fill[a] + 1] = t[(k + 2) % 3];
+                fill[a] += 2;
+            }
+        }
+        // Interior vertices with their distinct neighbours (compressed adjacency).
+        let mut interior: Vec<(u32, u32, u32)> = Vec::with_capacity(n);
+        let mut adj: Vec<u32> = Vec::with_capacity(start[n] / 2);
+        for i in 0..n {
+            let nb = &mut listed[start[i]..start[i + 1]];
+            nb.sort_unstable();
+            let first = adj.len();
+            let mut boundary = false;
+            let mut k = 0;
+            while k < nb.len() {
+                let run = nb[k..].iter().take_while(|&&j| j == nb[k]).count();
+                boundary |= run == 1;
+                adj.push(nb[k]);
+                k += run;
+            }
+            if boundary || adj.len() == first {
+                adj.truncate(first);
+            } else {
+                interior.push((i as u32, first as u32, adj.len() as u32));
+            }
         }
         let mut next = self.positions.clone();
         for _ in 0..iterations {
-            for i in 0..n {
-                let nb = &adj[start[i]..start[i + 1]];
-                if boundary[i] || nb.is_empty() {
-                    continue;
-                }
+            for &(i, a, b) in &interior {
+                let nb = &adj[a as usize..b as usize];
                 let mut m = [0.0f32; 3];
                 for &j in nb {
                     let p = self.positions[j as usize];
@@ -330,13 +367,13 @@ impl Mesh {
                         m[k] += p[k];
                     }
                 }
-                let p = self.positions[i];
+                let p = self.positions[i as usize];
                 for k in 0..3 {
-                    next[i][k] = p[k] + lambda * (m[k] / nb.len() as f32 - p[k]);
+                    next[i as usize][k] = p[k] + lambda * (m[k] / nb.len() as f32 - p[k]);
                 }
             }
+            // Only interior vertices are written, and they all are on every pass.
             std::mem::swap(&mut self.positions, &mut next);
-            next.copy_from_slice(&self.positions);
         }
     }
 }
@@ -527,6 +564,27 @@ mod tests {
         assert!(m.positions[12][2] < 0.0005);
         assert_eq!(m.positions[0], before[0]);
         assert_eq!(m.positions[4], before[4]);
+    }
+
+    #[test]
+    fn grid_smoothing_flattens_a_bump_and_keeps_edges_rims_and_jumps() {
+        let mut g = flat_grid(7, 7, 0.001, 0.001);
+        g.points[3 * 7 + 3][2] = 0.001; // a bump
+        g.points[5 * 7 + 1] = [f32::NAN; 3]; // a hole
+        g.points[1 * 7 + 5][2] = 0.05; // a jump past the edge limit
+        let (p, interior) = g.smoothed_points(5, 0.5, 0.012);
+        assert!(p[3 * 7 + 3][2] < 0.0005 && p[3 * 7 + 3][2] > 0.0);
+        // The scan's edge, the hole's rim and both sides of the jump stay where they were.
+        for i in [0, 3, 6 * 7 + 3, 4 * 7 + 1, 5 * 7 + 2, 1 * 7 + 5, 1 * 7 + 4, 2 * 7 + 5] {
+            assert_eq!(p[i], g.points[i], "point {i}");
+            assert!(!interior.contains(&i), "point {i}");
+        }
+        assert!(p[5 * 7 + 1][0].is_nan());
+        assert!(interior.contains(&(3 * 7 + 3)));
+        assert_eq!(interior.len(), 25 - 6, "interior: {interior:?}"); // less the hole, jump and their neighbours
+                                                                      // No passes: the points as they are.
+        let bits = |v: &[[f32; 3]]| v.iter().map(|p| p.map(f32::to_bits)).collect::<Vec<_>>();
+        assert_eq!(bits(&g.smoothed_points(0, 0.5, 0.012).0), bits(&g.points));
     }
 
     #[test]

@@ -12,7 +12,7 @@
 //! stands.
 
 use crate::geom::{Iso3, Mat3, Plane, Quat, Vec3};
-use crate::mesh::{mesh_grid, Grid, Mesh, MeshConfig};
+use crate::mesh::{Grid, Mesh, MeshConfig};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 
 /// One observed point of the camera being refined.
@@ -100,16 +100,15 @@ pub fn grid_observations(
     motion: &ScanMotion,
     max_spread_m: f64,
 ) -> Result<Vec<(usize, Observation)>, RefineError> {
-    let mut out = Vec::new();
+    let mut out = Vec::with_capacity(points.len());
+    let mut travels: Vec<(usize, Vec3, f64)> = Vec::with_capacity(samples);
+    let optical_from_carm = carm_from_optical.inverse();
     for (f, col) in points.chunks(samples.max(1)).enumerate() {
-        let travels: Vec<(usize, Vec3, f64)> = col
-            .iter()
-            .enumerate()
-            .filter_map(|(s, p)| {
-                let v = Vec3::new(p[0].into(), p[1].into(), p[2].into());
-                v.is_finite().then(|| motion.travel_of(v, plane).map(|t| (s, v, t)))?
-            })
-            .collect();
+        travels.clear();
+        travels.extend(col.iter().enumerate().filter_map(|(s, p)| {
+            let v = Vec3::new(p[0].into(), p[1].into(), p[2].into());
+            v.is_finite().then(|| motion.travel_of(v, plane).map(|t| (s, v, t)))?
+        }));
         if travels.is_empty() {
             continue;
         }
@@ -118,8 +117,10 @@ pub fn grid_observations(
             return Err(RefineError::NotOneTravel { frame: f, spread_m: hi - lo, max_spread_m });
         }
         let pose = motion.at((lo + hi) / 2.0);
+        let optical_from_table = optical_from_carm.compose(&pose.inverse());
         out.extend(travels.iter().filter_map(|&(s, v, _)| {
-            Observation::from_point(v, &pose, carm_from_optical).map(|o| (f * samples + s, o))
+            let ray = optical_from_table.transform_point(v).try_normalize()?;
+            Some((f * samples + s, Observation { ray, table_from_carm: pose }))
         }));
     }
     Ok(out)
@@ -148,9 +149,9 @@ pub struct RefineConfig {
     pub max_rotation_deg: f64,
     /// Largest RMS point-to-plane residual accepted after the fit, metres.
     pub max_rms_m: f64,
-    /// Laplacian smoothing passes over both surfaces before the fit (the refined placement is
-    /// then applied to the points as measured): averages the line detector's noise out of the
-    /// correspondences.
+    /// Laplacian smoothing passes (on the grid, four neighbours) over both surfaces before the
+    /// fit (the refined placement is then applied to the points as measured): averages the line
+    /// detector's noise out of the correspondences.
     pub smooth_iterations: u32,
     /// Points of one frame must lie on laser planes no further apart in travel than this,
     /// metres (see [`grid_observations`]).
@@ -170,7 +171,7 @@ impl Default for RefineConfig {
             max_translation_m: 0.02,
             max_rotation_deg: 2.0,
             max_rms_m: 0.001,
-            smooth_iterations: 3,
+            smooth_iterations: 6,
             max_travel_spread_m: 0.001,
         }
     }
@@ -450,6 +451,32 @@ pub fn refine_camera(
     })
 }
 
+/// Points (as `Vec3`) and unit normals of a frame-major grid of `samples` per frame, the normal
+/// from the differences to the grid neighbours (across the frame and along the scan) within
+/// `max_edge_m`; a zero normal where a direction has no such neighbour.
+fn grid_normals(points: &[[f32; 3]], samples: usize, max_edge_m: f32) -> (Vec<Vec3>, Vec<Vec3>) {
+    let v = |a: [f32; 3]| Vec3::new(a[0].into(), a[1].into(), a[2].into());
+    let n = points.len();
+    let lim2 = f64::from(max_edge_m).powi(2);
+    // The neighbour at index j if it exists and is close, else the point itself.
+    let near = |i: usize, j: Option<usize>| -> Vec3 {
+        let p = v(points[i]);
+        match j.filter(|&j| j < n).map(|j| v(points[j])) {
+            Some(q) if (q - p).norm_squared() <= lim2 => q,
+            _ => p,
+        }
+    };
+    let normals = (0..n)
+        .map(|i| {
+            let s = i % samples.max(1);
+            let across = near(i, (s + 1 < samples).then_some(i + 1)) - near(i, (s > 0).then(|| i - 1));
+            let along = near(i, Some(i + samples)) - near(i, i.checked_sub(samples));
+            across.cross(along).try_normalize().unwrap_or(Vec3::ZERO)
+        })
+        .collect();
+    (points.iter().map(|&p| v(p)).collect(), normals)
+}
+
 /// Refines the placement of the camera whose `grid` (triangulated through `carm_from_optical`)
 /// is given against the `reference` grid of another camera, and on success re-triangulates the
 /// grid's points through the refined placement, in place. Both surfaces are smoothed for the fit
@@ -465,16 +492,28 @@ pub fn refine_grid(
 ) -> Result<RefineReport, RefineError> {
     let measured =
         grid_observations(grid.points(), grid.samples(), carm_from_optical, plane, motion, cfg.max_travel_spread_m)?;
-    let mesh_cfg = MeshConfig { smooth_iterations: cfg.smooth_iterations, ..MeshConfig::default() };
-    let mut surface = mesh_grid(reference, &mesh_cfg);
-    surface.compute_normals();
-    let surface = Reference::from_mesh(&surface)?;
-    let smoothed = mesh_grid(grid, &mesh_cfg);
-    let obs: Vec<Observation> =
-        grid_observations(&smoothed.positions, 1, carm_from_optical, plane, motion, f64::INFINITY)?
-            .into_iter()
-            .map(|(_, o)| o)
-            .collect();
+    // Both surfaces smoothed on their grids; the reference with normals from its grid.
+    let mesh_cfg = MeshConfig::default();
+    let smooth = |g: &Grid| g.smoothed_points(cfg.smooth_iterations, mesh_cfg.smooth_lambda, mesh_cfg.max_edge_m);
+    let (ref_points, _) = smooth(reference);
+    let (points, normals) = grid_normals(&ref_points, reference.samples(), mesh_cfg.max_edge_m);
+    let surface = Reference::new(&points, &normals)?;
+    // The fit uses at most `max_points` observations, from the interior of the smoothed grid
+    // (where every point was smoothed); each point's own travel puts it on a laser plane.
+    let (smoothed, interior) = smooth(grid);
+    let step = interior.len().div_ceil(cfg.max_points.max(1)).max(1);
+    let optical_from_carm = carm_from_optical.inverse();
+    let obs: Vec<Observation> = interior
+        .iter()
+        .step_by(step)
+        .filter_map(|&i| {
+            let p = smoothed[i];
+            let v = Vec3::new(p[0].into(), p[1].into(), p[2].into());
+            let pose = motion.at(motion.travel_of(v, plane)?);
+            let ray = optical_from_carm.transform_point(pose.inverse().transform_point(v)).try_normalize()?;
+            Some(Observation { ray, table_from_carm: pose })
+        })
+        .collect();
     let report = refine_camera(&surface, &obs, carm_from_optical, plane, cfg)?;
     let points = grid.points_mut();
     for (i, o) in measured {
