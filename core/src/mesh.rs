@@ -568,19 +568,20 @@ mod tests {
 
     #[test]
     fn grid_smoothing_flattens_a_bump_and_keeps_edges_rims_and_jumps() {
+        let at = |f: usize, s: usize| f * 7 + s;
         let mut g = flat_grid(7, 7, 0.001, 0.001);
-        g.points[3 * 7 + 3][2] = 0.001; // a bump
-        g.points[5 * 7 + 1] = [f32::NAN; 3]; // a hole
-        g.points[1 * 7 + 5][2] = 0.05; // a jump past the edge limit
+        g.points[at(3, 3)][2] = 0.001; // a bump
+        g.points[at(5, 1)] = [f32::NAN; 3]; // a hole
+        g.points[at(1, 5)][2] = 0.05; // a jump past the edge limit
         let (p, interior) = g.smoothed_points(5, 0.5, 0.012);
-        assert!(p[3 * 7 + 3][2] < 0.0005 && p[3 * 7 + 3][2] > 0.0);
+        assert!(p[at(3, 3)][2] < 0.0005 && p[at(3, 3)][2] > 0.0);
         // The scan's edge, the hole's rim and both sides of the jump stay where they were.
-        for i in [0, 3, 6 * 7 + 3, 4 * 7 + 1, 5 * 7 + 2, 1 * 7 + 5, 1 * 7 + 4, 2 * 7 + 5] {
+        for i in [0, 3, at(6, 3), at(4, 1), at(5, 2), at(1, 5), at(1, 4), at(2, 5)] {
             assert_eq!(p[i], g.points[i], "point {i}");
             assert!(!interior.contains(&i), "point {i}");
         }
-        assert!(p[5 * 7 + 1][0].is_nan());
-        assert!(interior.contains(&(3 * 7 + 3)));
+        assert!(p[at(5, 1)][0].is_nan());
+        assert!(interior.contains(&(at(3, 3))));
         assert_eq!(interior.len(), 25 - 6, "interior: {interior:?}"); // less the hole, jump and their neighbours
                                                                       // No passes: the points as they are.
         let bits = |v: &[[f32; 3]]| v.iter().map(|p| p.map(f32::to_bits)).collect::<Vec<_>>();
