@@ -12,10 +12,17 @@
 //! feed falls silent for `max_gap_s` (a pose gap). Requests are `xsurf_msgs/ScanEvent` messages
 //! on `/scan/request` (event START, END or ABORT), from the hospital stack or
 //! `ros2 topic pub`.
+//!
+//! With `follow_placements` (the default) the cameras' placements refined by the merger
+//! (`/surface/placements`, `carm -> <cam>_optical_frame`) replace the rig's between scans, and
+//! `/tf_static` is published again: `c_arm_pose` stays the one source of the static transforms,
+//! and the next scans are triangulated through the refined placements. (The merger's
+//! `save_rig_file` keeps them across restarts.)
 
 use super::decl;
 use crate::convert;
 use std::sync::Arc;
+use xsurf_core::geom::Iso3;
 use xsurf_core::pose::table_from_carm;
 use xsurf_core::rig::Rig;
 use xsurf_msgs::sensor_msgs::JointState as JointStateMsg;
@@ -50,6 +57,12 @@ pub fn declarations() -> Vec<ParamDecl> {
             "encoder mode: a stop this close to travel_end_m is END, elsewhere ABORT (stall)",
         ),
         decl("max_gap_s", V::Double(0.2), "s", "encoder mode: silence of the feed during a scan is ABORT"),
+        decl(
+            "follow_placements",
+            V::Bool(true),
+            "",
+            "take the merger's refined camera placements (/surface/placements) into /tf_static between scans",
+        ),
     ]
 }
 
@@ -70,6 +83,8 @@ struct Config {
     rig: Rig,
     table_frame: String,
     carm_frame: String,
+    follow_placements: bool,
+    rig_file: String,
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
@@ -117,6 +132,8 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         rig,
         table_frame: p.string("table_frame")?,
         carm_frame: p.string("carm_frame")?,
+        follow_placements: p.bool("follow_placements")?,
+        rig_file,
     })
 }
 
@@ -138,11 +155,16 @@ pub struct CArmPoseNode {
     rest: Option<(i64, f64)>,
     start_requested: bool,
     bad_samples: u64,
+    /// Refined placements received (rig camera index, `carm -> optical`), applied between scans.
+    placements: Vec<(usize, Iso3)>,
+    placements_applied: u64,
 }
 
 const IN_REQUEST: usize = 0;
 const IN_ENCODER: usize = 1;
+const IN_PLACEMENTS: usize = 2;
 const OUT_TF: usize = 0;
+const OUT_STATIC: usize = 1;
 const OUT_EVENTS: usize = 3;
 
 impl CArmPoseNode {
@@ -164,7 +186,64 @@ impl CArmPoseNode {
             rest: None,
             start_requested: false,
             bad_samples: 0,
+            placements: Vec::new(),
+            placements_applied: 0,
         })
+    }
+
+    /// `carm -> <cam>_optical_frame` of every rig camera on `/tf_static`.
+    fn publish_statics(&self, now: i64, out: &mut Outbox) {
+        let tf = TFMessage {
+            transforms: self
+                .cfg
+                .rig
+                .cameras
+                .iter()
+                .map(|c| {
+                    convert::transform_stamped(
+                        now,
+                        &self.cfg.carm_frame,
+                        &format!("{}_optical_frame", c.name),
+                        &c.carm_from_optical(),
+                    )
+                })
+                .collect(),
+        };
+        out.publish(OUT_STATIC, Msg::Tf(Arc::new(tf)));
+    }
+
+    /// Takes the refined placements of a `/surface/placements` message (applied between scans).
+    /// A transform from another parent, to a frame that is no rig camera's, or with a rotation
+    /// that is no unit quaternion refuses the whole message.
+    fn take_placements(&mut self, m: &TFMessage) -> Result<(), NodeError> {
+        let mut taken = Vec::new();
+        for t in &m.transforms {
+            let (parent, child) = (t.header.frame_id.trim_start_matches('/'), t.child_frame_id.trim_start_matches('/'));
+            if parent != self.cfg.carm_frame {
+                return Err(NodeError::new(format!(
+                    "/surface/placements: transform to {child} is from {parent:?}, not from {:?}",
+                    self.cfg.carm_frame
+                )));
+            }
+            let cam = child
+                .strip_suffix("_optical_frame")
+                .and_then(|n| self.cfg.rig.cameras.iter().position(|c| c.name == n));
+            let Some(cam) = cam else {
+                return Err(NodeError::new(format!(
+                    "/surface/placements: {child} is not a rig camera's optical frame"
+                )));
+            };
+            let (q, v) = (t.transform.rotation, t.transform.translation);
+            let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
+            if !((norm - 1.0).abs() < 1e-3 && v.x.is_finite() && v.y.is_finite() && v.z.is_finite()) {
+                return Err(NodeError::new(format!(
+                    "/surface/placements: {child}: not a rigid transform (quaternion norm {norm})"
+                )));
+            }
+            taken.push((cam, convert::iso(&t.transform)));
+        }
+        self.placements.extend(taken);
+        Ok(())
     }
     fn travel(&self, now: i64) -> f64 {
         if let Some(t) = self.stopped_at {
@@ -292,6 +371,7 @@ impl Component for CArmPoseNode {
         vec![
             Port::new("/scan/request", ScanEvent::TYPE_NAME, QosClass::Reliable),
             Port::new("/carm/encoder", JointState::TYPE_NAME, QosClass::Reliable),
+            Port::new("/surface/placements", TFMessage::TYPE_NAME, QosClass::Reliable),
         ]
     }
     fn outputs(&self) -> Vec<Port> {
@@ -306,9 +386,13 @@ impl Component for CArmPoseNode {
         declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
-        let c = config(p)?;
+        let mut c = config(p)?;
         if self.scanning {
             return Err(Params::invalid("c_arm_pose", "parameters cannot change during a scan"));
+        }
+        // The same rig file: the placements followed so far stay.
+        if c.rig_file == self.cfg.rig_file {
+            c.rig = self.cfg.rig.clone();
         }
         self.cfg = c;
         Ok(())
@@ -347,29 +431,26 @@ impl Component for CArmPoseNode {
             }
             (IN_ENCODER, Msg::JointState(js)) if self.cfg.encoder => self.encoder_sample(js, out),
             (IN_ENCODER, Msg::JointState(_)) => Ok(()),
+            (IN_PLACEMENTS, Msg::Tf(t)) if self.cfg.follow_placements => self.take_placements(t),
+            (IN_PLACEMENTS, Msg::Tf(_)) => Ok(()),
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
         }
     }
     fn tick(&mut self, now: i64, out: &mut Outbox) {
+        if !self.scanning && !self.placements.is_empty() {
+            for (cam, e) in std::mem::take(&mut self.placements) {
+                let c = &mut self.cfg.rig.cameras[cam];
+                c.set_carm_from_optical(&e);
+                log::info!("c_arm_pose: {} placed as refined by the merger", c.name);
+                self.placements_applied += 1;
+            }
+            if self.statics_sent {
+                self.publish_statics(now, out);
+            }
+        }
         if !self.statics_sent {
             self.statics_sent = true;
-            let tf = TFMessage {
-                transforms: self
-                    .cfg
-                    .rig
-                    .cameras
-                    .iter()
-                    .map(|c| {
-                        convert::transform_stamped(
-                            now,
-                            &self.cfg.carm_frame,
-                            &format!("{}_optical_frame", c.name),
-                            &c.carm_from_optical(),
-                        )
-                    })
-                    .collect(),
-            };
-            out.publish(1, Msg::Tf(Arc::new(tf)));
+            self.publish_statics(now, out);
             if self.cfg.auto_start && !self.cfg.encoder {
                 self.start_ns = Some(now + self.cfg.delay_ns);
             }
@@ -400,7 +481,12 @@ impl Component for CArmPoseNode {
         }
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("scans", self.scans), ("aborts", self.aborts), ("bad_samples", self.bad_samples)]
+        vec![
+            ("scans", self.scans),
+            ("aborts", self.aborts),
+            ("bad_samples", self.bad_samples),
+            ("placements_applied", self.placements_applied),
+        ]
     }
 }
 
@@ -451,6 +537,65 @@ mod tests {
     }
 
     const MS: i64 = 1_000_000;
+
+    fn statics(seen: &Seen) -> Vec<Vec<(String, Iso3)>> {
+        seen.borrow()
+            .iter()
+            .filter_map(|(t, m)| match m {
+                Msg::Tf(tf) if t == "/tf_static" => {
+                    Some(tf.transforms.iter().map(|x| (x.child_frame_id.clone(), convert::iso(&x.transform))).collect())
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn placements(child: &str, e: &Iso3) -> Msg {
+        Msg::Tf(Arc::new(TFMessage { transforms: vec![convert::transform_stamped(0, "carm", child, e)] }))
+    }
+
+    #[test]
+    fn refined_placements_replace_the_rig_between_scans_and_bad_ones_are_refused() {
+        let (mut r, seen) = node(&[("auto_start", V::Bool(false))]);
+        r.tick(0);
+        let first = statics(&seen);
+        assert_eq!(first.len(), 1);
+        let cam2 = first[0].iter().find(|(c, _)| c == "cam2_optical_frame").unwrap().1;
+        let mut refined = cam2;
+        refined.translation.x += 0.002;
+        // During a scan the placement waits for its end.
+        request(&mut r, 10 * MS, ScanEvent::START);
+        r.tick(20 * MS);
+        r.publish("/surface/placements", &placements("cam2_optical_frame", &refined));
+        r.tick(30 * MS);
+        assert_eq!(statics(&seen).len(), 1, "not during a scan");
+        request(&mut r, 40 * MS, ScanEvent::END);
+        r.tick(50 * MS);
+        let now = statics(&seen);
+        assert_eq!(now.len(), 2, "published again after the scan");
+        let got: std::collections::BTreeMap<_, _> = now[1].iter().cloned().collect();
+        assert!((got["cam2_optical_frame"].translation - refined.translation).norm() < 1e-12);
+        let cam1 = first[0].iter().find(|(c, _)| c == "cam1_optical_frame").unwrap().1;
+        assert_eq!(got["cam1_optical_frame"].translation, cam1.translation);
+        assert_eq!(r.nodes()[0].component.counters().iter().find(|c| c.0 == "placements_applied").unwrap().1, 1);
+        // A frame that is no rig camera's, another parent, a non-rotation: refused and counted.
+        r.publish("/surface/placements", &placements("cam9_optical_frame", &refined));
+        let mut bad = convert::transform_stamped(0, "carm", "cam1_optical_frame", &refined);
+        bad.transform.rotation.w = 3.0;
+        r.publish("/surface/placements", &Msg::Tf(Arc::new(TFMessage { transforms: vec![bad] })));
+        let other = convert::transform_stamped(0, "table", "cam1_optical_frame", &refined);
+        r.publish("/surface/placements", &Msg::Tf(Arc::new(TFMessage { transforms: vec![other] })));
+        r.tick(60 * MS);
+        assert_eq!(r.nodes()[0].errors, 3);
+        assert!(r.nodes()[0].last_error.as_deref().unwrap().contains("table"));
+        assert_eq!(statics(&seen).len(), 2);
+        // Not followed when asked not to.
+        let (mut r, seen) = node(&[("auto_start", V::Bool(false)), ("follow_placements", V::Bool(false))]);
+        r.tick(0);
+        r.publish("/surface/placements", &placements("cam2_optical_frame", &refined));
+        r.tick(10 * MS);
+        assert_eq!(statics(&seen).len(), 1);
+    }
 
     #[test]
     fn speed_model_starts_and_stops_on_request_and_numbers_the_scans() {
