@@ -7,6 +7,8 @@
 //! xsurf calibrate placement [--rig RIG.yaml] -o RIG.yaml --board COLSxROWS --square M --board-origin X,Y[,Z]
 //!       [--board-yaw DEG] (--camera NAME --intrinsics CAMERA.yaml --travels T[,T...] IMAGE...)... [--report DIR]
 //! xsurf calibrate laser --rig RIG.yaml [-o RIG.yaml] (--camera NAME --heights H[,H...] IMAGE...)... [--report DIR]
+//! xsurf calibrate scan BAG --rig RIG.yaml [-o RIG.yaml] [--params-file FILE] [--max-translation M]
+//!       [--max-rotation DEG] [--report DIR]
 //! ```
 //! Each command prints its numbers, writes a report (`report.json` and PNG plots; by default in
 //! `<output>_<command>_report/`) and explains every image it could not use.
@@ -125,8 +127,11 @@ pub fn run(args: &[String]) -> anyhow::Result<()> {
         Some("intrinsics") => cmd_intrinsics(rest),
         Some("placement") => cmd_placement(rest),
         Some("laser") => cmd_laser(rest),
-        Some(other) => Err(usage(format!("unknown calibrate command {other:?} (synth, intrinsics, placement, laser)"))),
-        None => Err(usage("calibrate needs a command (synth, intrinsics, placement, laser)")),
+        Some("scan") => cmd_scan(rest),
+        Some(other) => {
+            Err(usage(format!("unknown calibrate command {other:?} (synth, intrinsics, placement, laser, scan)")))
+        }
+        None => Err(usage("calibrate needs a command (synth, intrinsics, placement, laser, scan)")),
     }
 }
 
@@ -519,6 +524,119 @@ fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
         &dir.join("report.json"),
         &json!({"kind": "laser", "laser_plane": rig.laser_plane, "rms_m": r.rms_m, "max_m": r.max_m,
                 "used": r.used, "dropped": r.dropped, "images": images}),
+    )?;
+    println!("written {}; report: {}", out.display(), dir.display());
+    Ok(())
+}
+
+/// `xsurf calibrate scan BAG --rig RIG`: the placement of each further camera refined against
+/// the first camera's surface in a scan of any rigid object both cameras see, with no hand
+/// input. The bag is reconstructed offline with the merger's refinement (triangulated with the
+/// rig's laser plane and the bag's `/tf_static`); the refined placements go into the rig. Exits
+/// with an error, the rig untouched, if any camera's refinement was refused.
+fn cmd_scan(args: &[String]) -> anyhow::Result<()> {
+    let o = Opts::parse(
+        args,
+        &["-o", "--out", "--rig", "--report", "--params-file", "--max-translation", "--max-rotation"],
+        None,
+    )?;
+    let [bag] = o.positional.as_slice() else { return Err(usage("calibrate scan needs one BAG")) };
+    let rig_path = PathBuf::from(o.need("--rig")?);
+    let mut rig = xsurf_formats::rig::read(&rig_path)?;
+    let out = PathBuf::from(o.get("-o").or(o.get("--out")).unwrap_or(o.need("--rig")?));
+    let p = rig.laser_plane;
+    let mut params = vec![format!("laser_plane:=[{}, {}, {}, {}]", p[0], p[1], p[2], p[3]), "refine:=true".into()];
+    for (flag, name) in
+        [("--max-translation", "refine_max_translation_m"), ("--max-rotation", "refine_max_rotation_deg")]
+    {
+        if o.get(flag).is_some() {
+            let v = o.num(flag, 0.0)?;
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(usage(format!("{flag}: {v} must be positive")));
+            }
+            params.push(format!("{name}:={v}"));
+        }
+    }
+    let dir = report_dir(&o, &out, "scan");
+    println!("reconstructing {} into {} with the merger's refinement", bag.display(), dir.display());
+    let report = crate::offline::reconstruct(&crate::offline::Options {
+        bag: bag.clone(),
+        params_file: o.get("--params-file").map(PathBuf::from),
+        out: dir.clone(),
+        params,
+        ..Default::default()
+    })?;
+    // One scan's files are in DIR itself, several scans' in DIR/scan_<id>/: the last scan counts.
+    let Some(&scan) = report.scans.last() else {
+        bail!("{}: no scan was reconstructed (no START/END on /scan/events, or no frames)", bag.display());
+    };
+    let refinement = if report.scans.len() == 1 {
+        dir.join("refinement.json")
+    } else {
+        dir.join(format!("scan_{scan}/refinement.json"))
+    };
+    let text = std::fs::read_to_string(&refinement).map_err(|e| {
+        anyhow!("{}: {e}: the merger refined nothing (one camera only, or no refinement ran)", refinement.display())
+    })?;
+    let outcome: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}", refinement.display()))?;
+    let cameras = outcome["cameras"].as_array().cloned().unwrap_or_default();
+    let mut refused = Vec::new();
+    for c in &cameras {
+        let name = c["camera"].as_str().unwrap_or("?");
+        if c["status"] != "refined" {
+            refused.push(format!("{name}: {}", c["reason"].as_str().unwrap_or("refused")));
+            continue;
+        }
+        let t = &c["refined"]["translation"];
+        let q = &c["refined"]["rotation"];
+        let num = |v: &serde_json::Value| v.as_f64().ok_or_else(|| anyhow!("{}: bad number {v}", refinement.display()));
+        let e = xsurf_core::geom::Iso3::from_parts(
+            Vec3::new(num(&t[0])?, num(&t[1])?, num(&t[2])?),
+            xsurf_core::geom::Quat { x: num(&q[0])?, y: num(&q[1])?, z: num(&q[2])?, w: num(&q[3])? },
+        );
+        let cam = rig
+            .cameras
+            .iter_mut()
+            .find(|rc| rc.name == name)
+            .ok_or_else(|| anyhow!("rig file {}: no camera {name:?} (the bag has it)", rig_path.display()))?;
+        cam.set_carm_from_optical(&e);
+        let d = &c["correction_m"];
+        println!(
+            "{name}: refined against {}: moved {:.2} mm / {:.3} deg; residual RMS {:.3} -> {:.3} mm over {} points, \
+             overlap {:.0} %, {} iterations",
+            c["reference"].as_str().unwrap_or("?"),
+            (num(&d[0])?.powi(2) + num(&d[1])?.powi(2) + num(&d[2])?.powi(2)).sqrt() * 1e3,
+            num(&c["correction_deg"])?,
+            num(&c["rms_before_m"])? * 1e3,
+            num(&c["rms_after_m"])? * 1e3,
+            c["points"],
+            num(&c["overlap_fraction"])? * 100.0,
+            c["iterations"]
+        );
+    }
+    write_json(
+        &dir.join("report.json"),
+        &json!({"kind": "scan", "bag": bag, "scan_id": scan, "rig": out, "cameras": cameras,
+                "reconstruction": serde_json::to_value(&report)?}),
+    )?;
+    if !refused.is_empty() || cameras.is_empty() {
+        bail!(
+            "the rig {} is left as it was: {}",
+            rig_path.display(),
+            if refused.is_empty() { "no camera was refined".to_string() } else { refused.join("; ") }
+        );
+    }
+    let names: Vec<&str> = cameras.iter().filter_map(|c| c["camera"].as_str()).collect();
+    xsurf_formats::rig::write(
+        &out,
+        &rig,
+        &format!(
+            "xsurf rig file (see launch-config/rig_study.yaml); the placement of {} refined by `xsurf calibrate scan` \
+             from scan {scan} of {}",
+            names.join(", "),
+            bag.display()
+        ),
     )?;
     println!("written {}; report: {}", out.display(), dir.display());
     Ok(())

@@ -32,6 +32,8 @@ pub struct Options {
     pub progress: bool,
     /// A DICOM radiograph of the scan, placed under the surface.
     pub xray: Option<PathBuf>,
+    /// Parameters for every node, as ROS 2 `-p` rules (`name:=value`), after the params file.
+    pub params: Vec<String>,
 }
 
 /// Per-node figures in the report.
@@ -171,6 +173,9 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             bail!("params file {} does not exist", f.display());
         }
         args.extend(["--params-file".into(), f.to_string_lossy().into_owned()]);
+    }
+    for p in &opts.params {
+        args.extend(["-p".into(), p.clone()]);
     }
     let ros = RosArgs::parse(&args)?;
     let out_dir = opts.out.to_string_lossy().into_owned();

@@ -49,6 +49,9 @@ const USAGE: &str = "usage:
       the board flat on the tabletop (corner 0 at X,Y in `table`) -> carm -> <cam>_optical_frame in the rig
   xsurf calibrate laser --rig RIG [-o RIG] (--camera NAME --heights H[,H...] IMAGE...)... [--report DIR]
       the laser line on the tabletop at two or more heights -> laser_plane in the rig
+  xsurf calibrate scan BAG --rig RIG [-o RIG] [--params-file FILE] [--max-translation M] [--max-rotation DEG] [--report DIR]
+      each further camera's placement refined against the first camera's surface in a scan of any
+      rigid object both cameras see (the study's pyramid, say); no hand input
       (every calibrate command writes report.json and PNG plots to DIR, default <output>_<command>_report/)
   xsurf compose /NS/NODE_TYPE... | /NS/NAME=NODE_TYPE... [--ros-args ...]
       run several nodes in one process, connected in memory, every topic still on DDS
@@ -205,6 +208,7 @@ fn cmd_reconstruct(args: &[String]) -> anyhow::Result<()> {
         out: PathBuf::from(out),
         progress: !a.has("--quiet"),
         xray: a.get("--xray").map(PathBuf::from),
+        ..Default::default()
     };
     let r = offline::reconstruct(&opts)?;
     print_report(&r, out);
@@ -276,6 +280,7 @@ fn cmd_demo(args: &[String]) -> anyhow::Result<()> {
         out: recon.clone(),
         progress: true,
         xray: Some(bag.join(synth::XRAY_FILE)),
+        ..Default::default()
     })?;
     print_report(&r, &recon.display().to_string());
     println!("3/3 accuracy against the synthetic scanner's ground truth:");

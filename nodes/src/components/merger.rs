@@ -268,7 +268,7 @@ impl MergerNode {
             }
         }
         let (names, mut gs): (Vec<String>, Vec<Grid>) = grids.into_iter().unzip();
-        let refined = self.refine(&names, &mut gs);
+        let (refined, refinement) = self.refine(&names, &mut gs);
         if !refined.is_empty() {
             let placements = TFMessage {
                 transforms: refined
@@ -307,7 +307,7 @@ impl MergerNode {
         out.publish(0, cloud.clone());
         out.publish(1, marker.clone());
         self.last_outputs.set(vec![(0, cloud), (1, marker)]);
-        self.write(self.scan_id, &merged, &meshes);
+        self.write(self.scan_id, &merged, &meshes, &refinement);
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
             self.scan_id,
@@ -320,32 +320,44 @@ impl MergerNode {
     }
 
     /// Refines each further camera's placement against the first camera's grid; returns the
-    /// placements refined. Refusals are logged and counted.
-    fn refine(&mut self, names: &[String], grids: &mut [Grid]) -> Vec<(String, Iso3)> {
-        let Some((cfg, plane)) = self.cfg.refine else { return Vec::new() };
+    /// placements refined and, per camera, what happened (for `refinement.json`). Refusals are
+    /// logged and counted.
+    fn refine(&mut self, names: &[String], grids: &mut [Grid]) -> (Vec<(String, Iso3)>, Vec<serde_json::Value>) {
+        let Some((cfg, plane)) = self.cfg.refine else { return (Vec::new(), Vec::new()) };
         if grids.len() < 2 {
-            return Vec::new();
+            return (Vec::new(), Vec::new());
         }
         let scan = self.scan_id;
-        let mut refuse = |cam: &str, why: String| {
-            self.refinements_refused += 1;
-            log::warn!("merger: scan {scan}: {cam} keeps its calibrated placement: {why}");
+        let mut records = Vec::new();
+        let mut refuse = |cams: &[String], calibrated: Option<&Iso3>, why: String| -> Vec<serde_json::Value> {
+            cams.iter()
+                .map(|cam| {
+                    self.refinements_refused += 1;
+                    log::warn!("merger: scan {scan}: {cam} keeps its calibrated placement: {why}");
+                    serde_json::json!({
+                        "camera": cam, "reference": names[0], "status": "refused", "reason": why,
+                        "calibrated": calibrated.map(placement_json),
+                    })
+                })
+                .collect()
         };
         let motion = match self.motion {
             None => {
-                refuse(&names[1..].join(", "), "no table -> carm on /tf during the scan".into());
-                return Vec::new();
+                records.extend(refuse(&names[1..], None, "no table -> carm on /tf during the scan".into()));
+                return (Vec::new(), records);
             }
             Some((_, angle, offset)) if angle > MAX_ANGLE_CHANGE_RAD || offset > MAX_OFFSET_CHANGE_M => {
-                refuse(
-                    &names[1..].join(", "),
+                records.extend(refuse(
+                    &names[1..],
+                    None,
                     format!(
-                        "the C-arm turned {:.3} deg or the tabletop moved {:.1} mm during the scan; the refinement                          needs one angle and height per scan",
+                        "the C-arm turned {:.3} deg or the tabletop moved {:.1} mm during the scan; the refinement \
+                         needs one angle and height per scan",
                         angle.to_degrees(),
                         offset * 1e3
                     ),
-                );
-                return Vec::new();
+                ));
+                return (Vec::new(), records);
             }
             Some((pose, _, _)) => ScanMotion { table_from_carm: pose },
         };
@@ -354,7 +366,7 @@ impl MergerNode {
         for (name, grid) in names[1..].iter().zip(rest) {
             let frame = format!("{name}_optical_frame");
             let Some(e) = self.statics.carm_from(&frame) else {
-                refuse(name, format!("no carm -> {frame} on /tf_static"));
+                records.extend(refuse(std::slice::from_ref(name), None, format!("no carm -> {frame} on /tf_static")));
                 continue;
             };
             match refine_grid(&first[0], grid, &e, &plane, &motion, &cfg) {
@@ -362,11 +374,19 @@ impl MergerNode {
                     log_refinement(scan, name, &names[0], &r);
                     self.refinements += 1;
                     refined.push((name.clone(), r.carm_from_optical));
+                    let t = r.translation_m;
+                    records.push(serde_json::json!({
+                        "camera": name, "reference": names[0], "status": "refined",
+                        "calibrated": placement_json(&e), "refined": placement_json(&r.carm_from_optical),
+                        "correction_m": [t.x, t.y, t.z], "correction_deg": r.rotation_deg,
+                        "iterations": r.iterations, "rms_before_m": r.rms_before_m, "rms_after_m": r.rms_after_m,
+                        "overlap_fraction": r.overlap_fraction, "points": r.points,
+                    }));
                 }
-                Err(err) => refuse(name, err.to_string()),
+                Err(err) => records.extend(refuse(std::slice::from_ref(name), Some(&e), err.to_string())),
             }
         }
-        refined
+        (refined, records)
     }
 
     /// Writes refined placements into `save_rig_file`.
@@ -397,12 +417,21 @@ impl MergerNode {
         }
     }
 
-    fn write(&self, scan_id: u32, merged: &Mesh, meshes: &[(String, Mesh)]) {
+    fn write(&self, scan_id: u32, merged: &Mesh, meshes: &[(String, Mesh)], refinement: &[serde_json::Value]) {
         if let Some(dir) = &self.cfg.output_dir {
             let dir = dir.join(format!("scan_{scan_id}"));
             let plane = self.overlays.get(&scan_id);
             if let Err(e) = write_files(&dir, merged, meshes, plane, self.cfg.transparency) {
                 log::error!("merger: cannot write files in {}: {e}", dir.display());
+            }
+            if !refinement.is_empty() {
+                let path = dir.join("refinement.json");
+                let text =
+                    serde_json::to_string_pretty(&serde_json::json!({ "scan_id": scan_id, "cameras": refinement }))
+                        .unwrap_or_default();
+                if let Err(e) = xsurf_formats::write_bytes_atomic(&path, text.as_bytes()) {
+                    log::error!("merger: cannot write {}: {e}", path.display());
+                }
             }
         }
     }
@@ -420,7 +449,7 @@ impl MergerNode {
         if let Some((id, merged, meshes)) = &self.last_merge {
             if *id == scan_id {
                 log::info!("merger: scan {scan_id}: radiograph arrived after the merge; scene files rewritten");
-                self.write(scan_id, merged, meshes);
+                self.write(scan_id, merged, meshes, &[]);
             }
         }
         Ok(())
@@ -431,6 +460,12 @@ impl MergerNode {
 const MAX_ANGLE_CHANGE_RAD: f64 = 1e-4;
 /// Largest change of the C-arm's across / height offset during a scan, metres.
 const MAX_OFFSET_CHANGE_M: f64 = 1e-4;
+
+/// A placement `carm -> optical` as JSON: translation (m) and quaternion (x, y, z, w).
+fn placement_json(e: &Iso3) -> serde_json::Value {
+    let q = e.quaternion();
+    serde_json::json!({ "translation": e.translation.to_array(), "rotation": [q.x, q.y, q.z, q.w] })
+}
 
 fn log_refinement(scan: u32, name: &str, reference: &str, r: &RefineReport) {
     log::info!(
