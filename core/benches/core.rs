@@ -148,15 +148,20 @@ fn merging(c: &mut Criterion) {
             second
         })
     });
-    // The merger's whole job with its defaults: refine, fuse, mesh both, combine.
-    g.bench_function("refine_fuse_mesh_combine", |bch| {
+    // The merger's whole job with its defaults: refine, fuse, mesh both, combine, zipper.
+    g.bench_function("refine_fuse_mesh_combine_zipper", |bch| {
         bch.iter(|| {
             let mut grids = [a.clone(), b.clone()];
             let (first, second) = grids.split_at_mut(1);
             refine_grid(&first[0], &mut second[0], &cam, &plane, &motion, &RefineConfig::default()).unwrap();
             one_surface(&mut grids, &FuseConfig::default());
-            let mut merged = mesh_grid(&grids[0], &MeshConfig::default());
-            merged.append(&mesh_grid(&grids[1], &MeshConfig::default()));
+            let cfg = MeshConfig::default();
+            let mut merged = mesh_grid(&grids[0], &cfg);
+            let mut camera = vec![0u8; merged.positions.len()];
+            let second = mesh_grid(&grids[1], &cfg);
+            camera.extend(vec![1u8; second.positions.len()]);
+            merged.append(&second);
+            zipper(&mut merged, &camera, cfg.max_edge_m, cfg.min_angle_deg);
             merged
         })
     });
@@ -166,6 +171,7 @@ fn merging(c: &mut Criterion) {
 
 use xsurf_core::geom::{Iso3, Plane, Vec3};
 use xsurf_core::register::{refine_grid, RefineConfig, ScanMotion};
+use xsurf_core::zipper::zipper;
 
 criterion_group!(benches, edge_detection, triangulation, meshing, merging);
 criterion_main!(benches);

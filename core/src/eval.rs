@@ -92,6 +92,32 @@ pub fn coverage(truth: &[Vec3], reconstructed: &[[f32; 3]], radius: f64) -> f64 
     truth.iter().filter(|t| hash.any_within(**t, radius)).count() as f64 / truth.len() as f64
 }
 
+/// Fraction of `truth` points within about `radius` of the surface of `mesh` (its triangles,
+/// not only its vertices): each triangle is sampled at most `radius / 2` apart. A gap between
+/// triangles wider than `2 * radius` leaves the truth points in it uncovered; the distance is
+/// approximate to `radius / 4`.
+pub fn mesh_coverage(truth: &[Vec3], mesh: &crate::mesh::Mesh, radius: f64) -> f64 {
+    if truth.is_empty() {
+        return 0.0;
+    }
+    let v = |a: [f32; 3]| Vec3::new(a[0].into(), a[1].into(), a[2].into());
+    let step = radius / 2.0;
+    let mut samples = Vec::new();
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|i| v(mesh.positions[i as usize]));
+        let longest = (b - a).norm().max((c - b).norm()).max((a - c).norm());
+        let n = (longest / step).ceil().max(1.0) as usize;
+        for i in 0..=n {
+            for j in 0..=n - i {
+                let (u, w) = (i as f64 / n as f64, j as f64 / n as f64);
+                samples.push(a + (b - a) * u + (c - a) * w);
+            }
+        }
+    }
+    let hash = PointHash::new(samples, radius);
+    truth.iter().filter(|t| hash.any_within(**t, radius)).count() as f64 / truth.len() as f64
+}
+
 /// A pyramid's size measured from points: each face plane fitted by least squares, the base
 /// from the planes' intersections with the tabletop, the height from opposite faces meeting.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

@@ -43,3 +43,4 @@ pub mod rig;
 pub mod synth;
 pub mod triangulate;
 pub mod xray;
+pub mod zipper;

@@ -4,12 +4,13 @@
 
 mod common;
 
-use xsurf_core::eval::{accuracy, coverage, surface_errors};
+use xsurf_core::eval::{accuracy, coverage, mesh_coverage, surface_errors};
 use xsurf_core::fuse::{min_cross_distance, one_surface, FuseConfig};
 use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
 use xsurf_core::rig::Rig;
 use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene};
 use xsurf_core::triangulate::TriangulatorConfig;
+use xsurf_core::zipper::zipper;
 
 #[test]
 fn fused_pyramid_has_one_layer_full_coverage_and_no_loss_of_accuracy() {
@@ -51,4 +52,62 @@ fn fused_pyramid_has_one_layer_full_coverage_and_no_loss_of_accuracy() {
     for g in &grids {
         assert!(mesh_grid(g, &MeshConfig::default()).triangles.len() > 1000);
     }
+}
+
+/// The merged mesh after fusing has a strip of no triangles wherever ownership changes between
+/// the cameras; the zipper closes it. Measured as the truth covered by triangles (not only by
+/// vertices), against both cameras meshed as they are before fusing (a double layer).
+#[test]
+fn zippered_pyramid_has_no_seam_gaps() {
+    let rig = Rig::study(320, 240);
+    let settings = ScanSettings { speed_mps: 0.14, ..Default::default() };
+    let scanner =
+        Scanner::new(Scene::by_name("pyramid").unwrap(), rig.clone(), LaserModel::default(), settings).unwrap();
+    let mut grids = common::camera_grids(&scanner, &rig);
+    let min_angle = TriangulatorConfig::default().min_ray_plane_angle_deg;
+    let mut truth = Vec::new();
+    for ci in 0..rig.cameras.len() {
+        for f in 0..scanner.frame_count() {
+            truth.extend(scanner.observable_points(ci, f, min_angle));
+        }
+    }
+    let cfg = MeshConfig::default();
+    let merged = |grids: &[Grid]| {
+        let mut m = xsurf_core::mesh::Mesh::default();
+        let mut camera = Vec::new();
+        for (k, g) in grids.iter().enumerate() {
+            let mesh = mesh_grid(g, &cfg);
+            camera.extend(std::iter::repeat_n(k as u8, mesh.positions.len()));
+            m.append(&mesh);
+        }
+        (m, camera)
+    };
+    let r = 0.001;
+    let (unfused, _) = merged(&grids);
+    let cov_unfused = mesh_coverage(&truth, &unfused, r);
+    one_surface(&mut grids, &FuseConfig::default());
+    let (mut fused, camera) = merged(&grids);
+    let cov_fused = mesh_coverage(&truth, &fused, r);
+    let report = zipper(&mut fused, &camera, cfg.max_edge_m, cfg.min_angle_deg);
+    let cov_zipped = mesh_coverage(&truth, &fused, r);
+    let acc = accuracy(surface_errors(&scanner.scene, &fused.positions));
+    eprintln!(
+        "truth within 1 mm of a triangle: both cameras unfused {:.2} %, fused {:.2} %, zippered {:.2} %; {report:?}",
+        cov_unfused * 100.0,
+        cov_fused * 100.0,
+        cov_zipped * 100.0
+    );
+    // Measured: 99.90 % unfused, 98.89 % fused, 99.23 % zippered. What stays open is not a seam
+    // between the cameras' surfaces but narrow regions where fusing kept single isolated samples
+    // of one camera between the rims of the other (a face seen edge-on by the first camera): no
+    // triangle reaches them.
+    assert!(cov_fused < cov_unfused - 0.005, "fusing opens seams: {cov_fused} vs {cov_unfused}");
+    assert!(cov_zipped > cov_fused + 0.002, "zippered {cov_zipped} vs fused {cov_fused}");
+    assert!(report.bridges > 100 && report.closings > 100, "{report:?}");
+    assert!(acc.rms_m < 0.001, "{acc:?}");
+    // Every triangle is used once per directed edge: no overlap, no flip.
+    let mut e: Vec<(u32, u32)> =
+        fused.triangles.iter().flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]).collect();
+    e.sort_unstable();
+    assert!(e.windows(2).all(|w| w[0] != w[1]), "a directed edge is used twice");
 }

@@ -29,6 +29,7 @@ use xsurf_core::fuse::{one_surface, FuseConfig};
 use xsurf_core::geom::{Iso3, Plane};
 use xsurf_core::mesh::{mesh_grid, Grid, Mesh, MeshConfig};
 use xsurf_core::register::{refine_grid, RefineConfig, RefineReport, ScanMotion};
+use xsurf_core::zipper::zipper;
 use xsurf_formats::scene::{Scene, Surface, TexturedPlane};
 use xsurf_msgs::pointcloud;
 use xsurf_msgs::sensor_msgs::PointCloud2;
@@ -63,6 +64,13 @@ pub fn declarations() -> Vec<ParamDecl> {
             "m",
             "where cameras overlap, samples of different cameras closer than this are one observation: the \
              region's better-lit camera keeps it, averaged with the other's (0: keep both layers)",
+        ),
+        decl(
+            "zipper",
+            V::Bool(true),
+            "",
+            "stitch the seams between the cameras' surfaces in the merged mesh (triangles within max_edge_m and \
+             min_angle_deg)",
         ),
         decl(
             "refine",
@@ -125,6 +133,7 @@ struct Config {
     delay_ns: i64,
     mesh: MeshConfig,
     fuse: FuseConfig,
+    zipper: bool,
     transparency: f32,
     output_dir: Option<PathBuf>,
     frame_id: String,
@@ -182,6 +191,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         delay_ns: (delay * 1e9) as i64,
         mesh,
         fuse: FuseConfig { min_distance_m: fuse as f32, ..FuseConfig::default() },
+        zipper: p.bool("zipper")?,
         transparency: transparency as f32,
         output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
         frame_id: p.string("frame_id")?,
@@ -216,6 +226,7 @@ pub struct MergerNode {
     fused_dropped: u64,
     refinements: u64,
     refinements_refused: u64,
+    seam_triangles: u64,
     /// `carm -> <cam>_optical_frame` from `/tf_static`.
     statics: TfBuffer,
     /// The scan's C-arm motion: its first `table -> carm` and the largest change of angle
@@ -244,6 +255,7 @@ impl MergerNode {
             fused_dropped: 0,
             refinements: 0,
             refinements_refused: 0,
+            seam_triangles: 0,
             statics: TfBuffer::new("table", "carm", 0),
             motion: None,
             last_outputs: super::Republisher::default(),
@@ -281,11 +293,30 @@ impl MergerNode {
         }
         let fused = one_surface(&mut gs, &self.cfg.fuse);
         self.fused_dropped += fused.dropped.iter().sum::<usize>() as u64;
-        let meshes: Vec<(String, Mesh)> =
+        let mut meshes: Vec<(String, Mesh)> =
             names.into_iter().zip(&gs).map(|(n, g)| (n, mesh_grid(g, &self.cfg.mesh))).collect();
         let mut merged = Mesh::default();
-        for (_, m) in &meshes {
+        let mut camera = Vec::new();
+        for (k, (_, m)) in meshes.iter().enumerate() {
             merged.append(m);
+            camera.extend(std::iter::repeat_n(k as u8, m.positions.len()));
+        }
+        if self.cfg.zipper && meshes.len() > 1 {
+            let before = merged.triangles.len();
+            let z = zipper(&mut merged, &camera, self.cfg.mesh.max_edge_m, self.cfg.mesh.min_angle_deg);
+            self.seam_triangles += (z.bridges + z.closings) as u64;
+            // The seams are a surface of their own in the scene files.
+            let mut seams = Mesh {
+                positions: merged.positions.clone(),
+                colors: merged.colors.clone(),
+                triangles: merged.triangles[before..].to_vec(),
+                ..Mesh::default()
+            };
+            seams.remove_unreferenced();
+            seams.compute_normals();
+            if !seams.triangles.is_empty() {
+                meshes.push(("seams".into(), seams));
+            }
         }
         let header = convert::header(stamp, &self.cfg.frame_id);
         let pts = &merged.positions;
@@ -640,6 +671,7 @@ impl Component for MergerNode {
             ("fused_dropped", self.fused_dropped),
             ("refinements", self.refinements),
             ("refinements_refused", self.refinements_refused),
+            ("seam_triangles", self.seam_triangles),
         ]
     }
 }

@@ -1,0 +1,280 @@
+//! Zippering: the seams between the surfaces of different cameras stitched with triangles.
+//!
+//! After fusing ([`crate::fuse`]) each region of the scene belongs to one camera, and each
+//! camera's grid is meshed on its own, so a strip of no triangles runs along every border where
+//! ownership changes. The zipper closes those strips: each boundary edge of one camera's surface
+//! gets a triangle to the nearest boundary vertex of the other's across the gap, and each
+//! boundary edge of the other that then lies between two such triangles closes the fan. The new
+//! triangles obey the mesher's own limits (longest edge, smallest angle), so a real hole or a
+//! jump in depth is never bridged, and they keep the surface's orientation.
+
+use crate::cells::Cells;
+use crate::mesh::Mesh;
+use std::collections::HashSet;
+
+/// What the zipper did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ZipperReport {
+    /// Boundary edges of all surfaces before.
+    pub boundary_edges: usize,
+    /// Triangles added from a boundary edge to the other surface's nearest vertex.
+    pub bridges: usize,
+    /// Triangles added to close the fans between two bridges.
+    pub closings: usize,
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn len(a: [f32; 3]) -> f32 {
+    dot(a, a).sqrt()
+}
+
+/// True if triangle `(a, b, c)` has every edge within `max_edge` and its smallest angle at
+/// least `asin(sin_min)`.
+fn acceptable(p: &[[f32; 3]], [a, b, c]: [u32; 3], max_edge: f32, sin_min: f32) -> bool {
+    let (pa, pb, pc) = (p[a as usize], p[b as usize], p[c as usize]);
+    let (ab, bc, ca) = (len(sub(pb, pa)), len(sub(pc, pb)), len(sub(pa, pc)));
+    if ab > max_edge || bc > max_edge || ca > max_edge {
+        return false;
+    }
+    let area2 = len(cross(sub(pb, pa), sub(pc, pa)));
+    let (e1, e2) = if ab <= bc && ab <= ca {
+        (bc, ca)
+    } else if bc <= ca {
+        (ab, ca)
+    } else {
+        (ab, bc)
+    };
+    e1 * e2 > 0.0 && area2 / (e1 * e2) >= sin_min
+}
+
+/// Stitches the seams between the surfaces of different cameras in `mesh`, in place:
+/// `camera[v]` is the camera of vertex `v`. Triangles are added only between vertices of
+/// different cameras, with every edge within `max_edge_m` and every angle at least
+/// `min_angle_deg` (the mesher's limits). The mesh's triangles must be consistently oriented
+/// (as [`crate::mesh::mesh_grid`] makes them); the added ones follow that orientation.
+pub fn zipper(mesh: &mut Mesh, camera: &[u8], max_edge_m: f32, min_angle_deg: f32) -> ZipperReport {
+    let n = mesh.positions.len();
+    let mut report = ZipperReport::default();
+    if camera.len() != n || mesh.triangles.is_empty() {
+        return report;
+    }
+    // Directed edges a -> b per vertex, with the triangle's third vertex.
+    let mut start = vec![0usize; n + 1];
+    for t in &mesh.triangles {
+        for &v in t {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for i in 0..n {
+        start[i + 1] += start[i];
+    }
+    let mut fill = start.clone();
+    let mut out = vec![(0u32, 0u32); start[n]];
+    for t in &mesh.triangles {
+        for k in 0..3 {
+            let a = t[k] as usize;
+            out[fill[a]] = (t[(k + 1) % 3], t[(k + 2) % 3]);
+            fill[a] += 1;
+        }
+    }
+    let has_edge = |a: u32, b: u32| out[start[a as usize]..start[a as usize + 1]].iter().any(|e| e.0 == b);
+    // Boundary edges (a -> b with no b -> a), and the boundary vertices.
+    let mut boundary: Vec<(u32, u32, u32)> = Vec::new();
+    let mut on_boundary = vec![false; n];
+    for a in 0..n as u32 {
+        for &(b, opp) in &out[start[a as usize]..start[a as usize + 1]] {
+            if !has_edge(b, a) {
+                boundary.push((a, b, opp));
+                on_boundary[a as usize] = true;
+                on_boundary[b as usize] = true;
+            }
+        }
+    }
+    report.boundary_edges = boundary.len();
+    let p = &mesh.positions;
+    let indexed: Vec<[f32; 3]> = p.iter().zip(&on_boundary).map(|(q, &b)| if b { *q } else { [f32::NAN; 3] }).collect();
+    let cells = Cells::new(&indexed, max_edge_m);
+    let sin_min = min_angle_deg.to_radians().sin();
+    // Bridges: from each boundary edge of a lower-numbered camera to the best boundary vertex of
+    // a higher-numbered one on the far side of the edge. `links` records the new edges.
+    let mut added: Vec<[u32; 3]> = Vec::new();
+    let mut links: Vec<(u32, u32)> = Vec::new();
+    // Directed edges of the added triangles: a new triangle may not repeat any (it would
+    // overlap a neighbour or flip against it).
+    let mut used: HashSet<(u32, u32)> = HashSet::new();
+    let free = |used: &HashSet<(u32, u32)>, [x, y, z]: [u32; 3]| {
+        [(x, y), (y, z), (z, x)].iter().all(|&(u, v)| !has_edge(u, v) && !used.contains(&(u, v)))
+    };
+    let add = |used: &mut HashSet<(u32, u32)>, [x, y, z]: [u32; 3]| {
+        used.extend([(x, y), (y, z), (z, x)]);
+        [x, y, z]
+    };
+    for &(a, b, opp) in &boundary {
+        let (pa, pb) = (p[a as usize], p[b as usize]);
+        let normal = cross(sub(pb, pa), sub(p[opp as usize], pa));
+        let mid = [0, 1, 2].map(|k| (pa[k] + pb[k]) / 2.0);
+        let mut best: Option<(f32, u32)> = None;
+        cells.within(&mid, max_edge_m, |c, _| {
+            if camera[c as usize] <= camera[a as usize] || camera[b as usize] != camera[a as usize] {
+                return;
+            }
+            let tri = [b, a, c];
+            let pc = p[c as usize];
+            if dot(cross(sub(pa, pb), sub(pc, pb)), normal) <= 0.0
+                || !acceptable(p, tri, max_edge_m, sin_min)
+                || !free(&used, tri)
+            {
+                return;
+            }
+            let cost = len(sub(pc, pa)) + len(sub(pc, pb));
+            if best.is_none_or(|(bc, _)| cost < bc) {
+                best = Some((cost, c));
+            }
+        });
+        if let Some((_, c)) = best {
+            added.push(add(&mut used, [b, a, c]));
+            links.push((a.min(c), a.max(c)));
+            links.push((b.min(c), b.max(c)));
+            report.bridges += 1;
+        }
+    }
+    // Closings: a boundary edge d -> e of the higher-numbered camera whose ends both got a bridge
+    // to one vertex v closes the fan with (e, d, v).
+    links.sort_unstable();
+    links.dedup();
+    let linked = |x: u32, y: u32| links.binary_search(&(x.min(y), x.max(y))).is_ok();
+    let bridged_to: Vec<Vec<u32>> = {
+        let mut v = vec![Vec::new(); n];
+        for &(x, y) in &links {
+            v[x as usize].push(y);
+            v[y as usize].push(x);
+        }
+        v
+    };
+    for &(d, e, opp) in &boundary {
+        let cam = camera[d as usize];
+        if camera[e as usize] != cam {
+            continue;
+        }
+        // A vertex bridged to both ends closes a fan; at the end of a seam, one bridged to
+        // either end (on the far side of the edge) closes the last gap.
+        let (pd, pe) = (p[d as usize], p[e as usize]);
+        let normal = cross(sub(pe, pd), sub(p[opp as usize], pd));
+        let mut best: Option<(bool, f32, u32)> = None;
+        for &v in bridged_to[d as usize].iter().chain(&bridged_to[e as usize]) {
+            let pv = p[v as usize];
+            if camera[v as usize] >= cam
+                || dot(cross(sub(pd, pe), sub(pv, pe)), normal) <= 0.0
+                || !acceptable(p, [e, d, v], max_edge_m, sin_min)
+                || !free(&used, [e, d, v])
+            {
+                continue;
+            }
+            let both = linked(d, v) && linked(e, v);
+            let cost = len(sub(pv, pd)) + len(sub(pv, pe));
+            if best.is_none_or(|(b2, c2, _)| (both, -cost) > (b2, -c2)) {
+                best = Some((both, cost, v));
+            }
+        }
+        if let Some((_, _, v)) = best {
+            added.push(add(&mut used, [e, d, v]));
+            report.closings += 1;
+        }
+    }
+    mesh.triangles.extend(added);
+    if !mesh.normals.is_empty() {
+        mesh.compute_normals();
+    }
+    report
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::{mesh_grid, Grid, MeshConfig};
+    use crate::triangulate::Profile;
+
+    /// A flat strip `x in [x0, x1]` sampled every 1 mm across and 2 mm along, z = 0.
+    fn strip(x0: f32, x1: f32) -> Grid {
+        let ns = ((x1 - x0) / 0.001).round() as usize + 1;
+        let mut g = Grid::new(ns);
+        for f in 0..20 {
+            let points: Vec<[f32; 3]> = (0..ns).map(|s| [x0 + s as f32 * 0.001, f as f32 * 0.002, 0.0]).collect();
+            let profile = Profile { intensity: vec![100.0; ns], range: vec![0.5; ns], points, ..Profile::default() };
+            g.push(f as i64, &profile).unwrap();
+        }
+        g
+    }
+
+    fn two_strips(gap: f32) -> (Mesh, Vec<u8>) {
+        let cfg = MeshConfig { fill_single_holes: false, ..MeshConfig::default() };
+        let a = mesh_grid(&strip(0.0, 0.01), &cfg);
+        let b = mesh_grid(&strip(0.01 + gap, 0.02 + gap), &cfg);
+        let mut camera = vec![0u8; a.positions.len()];
+        camera.extend(vec![1u8; b.positions.len()]);
+        let mut m = a;
+        m.append(&b);
+        (m, camera)
+    }
+
+    fn area(m: &Mesh) -> f32 {
+        m.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| m.positions[i as usize]);
+                len(cross(sub(b, a), sub(c, a))) / 2.0
+            })
+            .sum()
+    }
+
+    /// Directed edges used twice (inconsistent orientation or overlap).
+    fn doubled_edges(m: &Mesh) -> usize {
+        let mut e: Vec<(u32, u32)> =
+            m.triangles.iter().flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]).collect();
+        e.sort_unstable();
+        e.windows(2).filter(|w| w[0] == w[1]).count()
+    }
+
+    #[test]
+    fn a_seam_is_closed_with_the_area_of_the_gap_and_nothing_more() {
+        for gap in [0.0015f32, 0.003, 0.006] {
+            let (mut m, camera) = two_strips(gap);
+            let before = area(&m);
+            let r = zipper(&mut m, &camera, 0.012, 12.0);
+            // The two strips are 10 mm x 38 mm each; the gap between them is `gap` x 38 mm.
+            let gained = area(&m) - before;
+            assert!((gained - gap * 0.038).abs() < 0.02 * gap * 0.038, "gap {gap}: area {gained} {r:?}");
+            assert!(r.bridges > 0 && r.closings > 0, "{r:?}");
+            assert_eq!(doubled_edges(&m), 0, "gap {gap}: a directed edge used twice");
+            // Every added triangle faces up like the strips.
+            for t in &m.triangles {
+                let [a, b, c] = t.map(|i| m.positions[i as usize]);
+                assert!(cross(sub(b, a), sub(c, a))[2] > 0.0);
+            }
+        }
+    }
+
+    #[test]
+    fn a_gap_wider_than_an_edge_and_one_camera_alone_are_left_alone() {
+        let (mut m, camera) = two_strips(0.02);
+        let n = m.triangles.len();
+        let r = zipper(&mut m, &camera, 0.012, 12.0);
+        assert_eq!((r.bridges, r.closings, m.triangles.len()), (0, 0, n));
+        // One camera: its own boundary is never bridged to itself.
+        let (mut m, _) = two_strips(0.003);
+        let n = m.triangles.len();
+        let one = vec![0u8; m.positions.len()];
+        assert_eq!(zipper(&mut m, &one, 0.012, 12.0).bridges, 0);
+        assert_eq!(m.triangles.len(), n);
+        // A label per vertex is required.
+        assert_eq!(zipper(&mut m, &[0], 0.012, 12.0), ZipperReport::default());
+    }
+}
