@@ -8,7 +8,7 @@
 //! are closer than `min_distance_m`.
 
 use crate::cells::Cells;
-use crate::mesh::Grid;
+use crate::mesh::{meshed_samples, Grid, MeshConfig};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 
 /// Settings.
@@ -21,11 +21,14 @@ pub struct FuseConfig {
     pub average: bool,
     /// Half size of the grid window whose mean strength is a sample's quality, samples.
     pub quality_radius: usize,
+    /// The mesher's limits: a sample that fusing leaves in no triangle is given back (see
+    /// [`one_surface`]).
+    pub mesh: MeshConfig,
 }
 
 impl Default for FuseConfig {
     fn default() -> Self {
-        Self { min_distance_m: 0.002, average: true, quality_radius: 3 }
+        Self { min_distance_m: 0.002, average: true, quality_radius: 3, mesh: MeshConfig::default() }
     }
 }
 
@@ -38,6 +41,8 @@ pub struct FuseReport {
     pub fused: usize,
     /// Close pairs examined.
     pub pairs: usize,
+    /// Kept samples that fusing left in no triangle, given back to the other cameras.
+    pub orphans: usize,
 }
 
 /// Mean strength over a `(2r+1)^2` window of valid samples (a summed-area table).
@@ -69,13 +74,71 @@ fn quality(g: &Grid, r: usize) -> Vec<f32> {
     q
 }
 
-/// Fuses the grids (all in `table`) in place: dropped samples become NaN.
+/// Fusing decides sample by sample, so where one camera's line is brighter over a strip only
+/// one sample wide (a face the other camera sees almost edge-on), a single column of its samples
+/// survives between the other camera's kept samples, and no triangle reaches it: a gap. Such an
+/// orphan (kept, in no triangle of its grid, and either fused or next to a sample the fuse
+/// dropped) is dropped, and the other grids' samples that were dropped within the distance of
+/// it are restored, so the other camera's mesh covers the strip. Returns the orphans.
+fn give_back_orphans(
+    grids: &mut [Grid],
+    originals: &[Vec<[f32; 3]>],
+    cfg: &FuseConfig,
+    dropped: &mut [usize],
+) -> usize {
+    let mut orphans: Vec<(usize, usize)> = Vec::new();
+    for (k, g) in grids.iter().enumerate() {
+        let meshed = meshed_samples(g, &cfg.mesh);
+        let (pts, orig, ns) = (g.points(), &originals[k], g.samples().max(1));
+        let fused_away = |j: usize| orig[j][0].is_finite() && !pts[j][0].is_finite();
+        for i in 0..pts.len() {
+            if !pts[i][0].is_finite() || meshed[i] {
+                continue;
+            }
+            let s = i % ns;
+            let near = [
+                (s > 0).then(|| i - 1),
+                (s + 1 < ns).then_some(i + 1),
+                i.checked_sub(ns),
+                Some(i + ns).filter(|&j| j < pts.len()),
+            ];
+            if pts[i] != orig[i] || near.iter().flatten().any(|&j| fused_away(j)) {
+                orphans.push((k, i));
+            }
+        }
+    }
+    if orphans.is_empty() {
+        return 0;
+    }
+    let cells: Vec<Cells> = originals.iter().map(|o| Cells::new(o, cfg.min_distance_m)).collect();
+    for &(k, i) in &orphans {
+        grids[k].points_mut()[i] = [f32::NAN; 3];
+        dropped[k] += 1;
+        let q = originals[k][i];
+        for (m, g) in grids.iter_mut().enumerate().filter(|(m, _)| *m != k) {
+            let pts = g.points_mut();
+            cells[m].within(&q, cfg.min_distance_m, |j, _| {
+                let j = j as usize;
+                if !pts[j][0].is_finite() {
+                    pts[j] = originals[m][j];
+                    dropped[m] -= 1;
+                }
+            });
+        }
+    }
+    orphans.len()
+}
+
+/// Fuses the grids (all in `table`) in place: dropped samples become NaN. Orphans (kept samples
+/// that fusing left in no triangle) are then given back to the other cameras, and last no two
+/// samples of different grids closer than `min_distance_m` stay.
 pub fn one_surface(grids: &mut [Grid], cfg: &FuseConfig) -> FuseReport {
     let mut report = FuseReport { dropped: vec![0; grids.len()], ..FuseReport::default() };
     if !(cfg.min_distance_m > 0.0) {
         return report;
     }
     let mut near: Vec<(f32, usize)> = Vec::new();
+    let originals: Vec<Vec<[f32; 3]>> = grids.iter().map(|g| g.points().to_vec()).collect();
     let qual: Vec<Vec<f32>> = grids.iter().map(|g| quality(g, cfg.quality_radius)).collect();
     for j in 1..grids.len() {
         for i in 0..j {
@@ -132,6 +195,7 @@ pub fn one_surface(grids: &mut [Grid], cfg: &FuseConfig) -> FuseReport {
             }
         }
     }
+    report.orphans = give_back_orphans(grids, &originals, cfg, &mut report.dropped);
     // Averaging moved kept samples a little: drop the rare pair that came closer than the bound.
     for j in 1..grids.len() {
         for i in 0..j {

@@ -166,7 +166,7 @@ fn avg_rgb(a: u32, b: u32) -> u32 {
 }
 
 /// Configuration of the mesher (parameters of the `mesher` node).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct MeshConfig {
     /// Longest triangle edge at zero range, metres.
@@ -394,27 +394,13 @@ fn grey_from_intensity(i: f32) -> [u8; 3] {
     [g, g, g]
 }
 
-/// Triangulates an organized grid into a mesh. Its vertices are the grid's finite points that
-/// some triangle uses (isolated points are left out of the surface; the grid keeps them).
-pub fn mesh_grid(grid: &Grid, cfg: &MeshConfig) -> Mesh {
+/// Calls `emit([a, b, c])` (grid indices) for every triangle the mesher makes of `grid`.
+fn grid_triangles(grid: &Grid, cfg: &MeshConfig, mut emit: impl FnMut([usize; 3])) {
     let (ns, nf) = (grid.samples(), grid.frames());
-    let mut index = vec![u32::MAX; grid.points().len()];
-    let mut mesh = Mesh::default();
-    for (i, p) in grid.points().iter().enumerate() {
-        if p[0].is_finite() {
-            index[i] = mesh.positions.len() as u32;
-            mesh.positions.push(*p);
-            mesh.colors.push(if grid.has_rgb() {
-                let c = grid.rgb()[i];
-                [(c >> 16) as u8, (c >> 8) as u8, c as u8]
-            } else {
-                grey_from_intensity(grid.intensity()[i])
-            });
-        }
-    }
+    let pts = grid.points();
+    let valid = |i: usize| pts[i][0].is_finite();
     let sin_min = cfg.min_angle_deg.to_radians().sin();
     let limit = |i: usize| cfg.max_edge_m + cfg.max_edge_per_m * grid.range()[i].max(0.0);
-    let pts = grid.points();
     // Accept a triangle of grid indices if its edges and angles pass.
     let ok = |a: usize, b: usize, c: usize| -> bool {
         let (pa, pb, pc) = (pts[a], pts[b], pts[c]);
@@ -443,10 +429,10 @@ pub fn mesh_grid(grid: &Grid, cfg: &MeshConfig) -> Mesh {
             let i10 = i00 + 1; // next sample, same frame
             let i01 = i00 + ns; // same sample, next frame
             let i11 = i01 + 1;
-            let v = [i00, i10, i01, i11].map(|i| index[i] != u32::MAX);
+            let v = [i00, i10, i01, i11].map(valid);
             let mut emit = |a: usize, b: usize, c: usize| {
                 if ok(a, b, c) {
-                    mesh.triangles.push([index[a], index[b], index[c]]);
+                    emit([a, b, c]);
                 }
             };
             match v {
@@ -468,6 +454,35 @@ pub fn mesh_grid(grid: &Grid, cfg: &MeshConfig) -> Mesh {
             }
         }
     }
+}
+
+/// For each grid sample, whether some triangle of [`mesh_grid`] uses it (a sample can be valid
+/// and still lie in no triangle: an isolated point, or one whose cells are all slivers, as on a
+/// face seen edge-on).
+pub fn meshed_samples(grid: &Grid, cfg: &MeshConfig) -> Vec<bool> {
+    let mut used = vec![false; grid.points().len()];
+    grid_triangles(grid, cfg, |t| t.iter().for_each(|&i| used[i] = true));
+    used
+}
+
+/// Triangulates an organized grid into a mesh. Its vertices are the grid's finite points that
+/// some triangle uses (isolated points are left out of the surface; the grid keeps them).
+pub fn mesh_grid(grid: &Grid, cfg: &MeshConfig) -> Mesh {
+    let mut index = vec![u32::MAX; grid.points().len()];
+    let mut mesh = Mesh::default();
+    for (i, p) in grid.points().iter().enumerate() {
+        if p[0].is_finite() {
+            index[i] = mesh.positions.len() as u32;
+            mesh.positions.push(*p);
+            mesh.colors.push(if grid.has_rgb() {
+                let c = grid.rgb()[i];
+                [(c >> 16) as u8, (c >> 8) as u8, c as u8]
+            } else {
+                grey_from_intensity(grid.intensity()[i])
+            });
+        }
+    }
+    grid_triangles(grid, cfg, |[a, b, c]| mesh.triangles.push([index[a], index[b], index[c]]));
     // Orient the surface to face up (the scanner looks down on the table).
     let up: f32 = mesh
         .triangles

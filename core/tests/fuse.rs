@@ -97,12 +97,11 @@ fn zippered_pyramid_has_no_seam_gaps() {
         cov_fused * 100.0,
         cov_zipped * 100.0
     );
-    // Measured: 99.90 % unfused, 98.89 % fused, 99.23 % zippered. What stays open is not a seam
-    // between the cameras' surfaces but narrow regions where fusing kept single isolated samples
-    // of one camera between the rims of the other (a face seen edge-on by the first camera): no
-    // triangle reaches them.
-    assert!(cov_fused < cov_unfused - 0.005, "fusing opens seams: {cov_fused} vs {cov_unfused}");
+    // Measured: 99.90 % unfused, 99.47 % fused, 99.82 % zippered (before fusing gave orphans
+    // back, 98.89 % fused and 99.23 % zippered: strips one sample wide kept by the wrong camera).
+    assert!(cov_fused < cov_unfused - 0.002, "fusing opens seams: {cov_fused} vs {cov_unfused}");
     assert!(cov_zipped > cov_fused + 0.002, "zippered {cov_zipped} vs fused {cov_fused}");
+    assert!(cov_zipped >= cov_unfused - 0.002, "seams left open: zippered {cov_zipped} vs unfused {cov_unfused}");
     assert!(report.bridges > 100 && report.closings > 100, "{report:?}");
     assert!(acc.rms_m < 0.001, "{acc:?}");
     // Every triangle is used once per directed edge: no overlap, no flip.

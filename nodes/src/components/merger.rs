@@ -190,7 +190,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         cameras,
         delay_ns: (delay * 1e9) as i64,
         mesh,
-        fuse: FuseConfig { min_distance_m: fuse as f32, ..FuseConfig::default() },
+        fuse: FuseConfig { min_distance_m: fuse as f32, mesh, ..FuseConfig::default() },
         zipper: p.bool("zipper")?,
         transparency: transparency as f32,
         output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
