@@ -12,7 +12,7 @@
 //! [`QUEUE_DEPTH`]). When the queue is full, a camera-stream (best-effort) message is dropped and
 //! counted; other messages wait (their publishers are reliable).
 
-use crate::component::{Component, Msg, QosClass};
+use crate::component::{Component, Msg, Port, QosClass};
 use crate::params::{ParamDecl, ParamValue, Params};
 use crate::rosargs::Remap;
 use futures::StreamExt;
@@ -165,6 +165,20 @@ enum Pub {
 }
 
 impl Pub {
+    /// The writer's id, as subscribers see it.
+    fn gid(&self) -> ros2_client::Gid {
+        match self {
+            Pub::Image(p) => p.gid(),
+            Pub::CameraInfo(p) => p.gid(),
+            Pub::Tf(p) => p.gid(),
+            Pub::LaserLine(p) => p.gid(),
+            Pub::Cloud(p) => p.gid(),
+            Pub::Marker(p) => p.gid(),
+            Pub::ScanEvent(p) => p.gid(),
+            Pub::JointState(p) => p.gid(),
+            Pub::Clock(p) => p.gid(),
+        }
+    }
     fn publish(&self, m: &Msg) -> Result<(), String> {
         match (self, m) {
             (Pub::Image(p), Msg::Image(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
@@ -236,6 +250,7 @@ impl DdsNode {
 }
 
 /// Starts a subscription whose messages go to `tx` as input `index`.
+#[allow(clippy::too_many_arguments)]
 fn subscribe(
     node: &mut Node,
     topic: &str,
@@ -244,6 +259,7 @@ fn subscribe(
     droppable: bool,
     index: usize,
     feed: Feed,
+    ignore: Arc<Vec<ros2_client::Gid>>,
 ) -> Result<(), HostError> {
     let Feed { tx, dropped, stop } = feed;
     let t = node
@@ -266,6 +282,8 @@ fn subscribe(
                                 break;
                             }
                             match r {
+                                // This process's own publications are delivered in memory.
+                                Ok((_, info)) if ignore.contains(&info.publisher_gid()) => {}
                                 Ok((m, _info)) => {
                                     let ev = $wrap(m);
                                     if droppable {
@@ -324,7 +342,7 @@ pub fn subscribe_forward(
     let (etx, erx) = sync_channel::<Event>(QUEUE_DEPTH);
     let dropped = Arc::new(AtomicU64::new(0));
     let feed = Feed { tx: etx, dropped: dropped.clone(), stop };
-    subscribe(node.node(), topic, type_name_full, qos(class), class == QosClass::Sensor, index, feed)?;
+    subscribe(node.node(), topic, type_name_full, qos(class), class == QosClass::Sensor, index, feed, Arc::default())?;
     std::thread::spawn(move || {
         while let Ok(ev) = erx.recv() {
             if let Event::Message(i, m) = ev {
@@ -579,19 +597,29 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     let qos_of = |node: usize| QosTable::from_params(&configs[node].1).map_err(HostError::Dds);
     // Publishers for every output, on the node that produces it.
     let mut pubs = Publishers::default();
+    let mut sensor_topics = Vec::new();
     for (ni, n) in router.nodes().iter().enumerate() {
         let table = qos_of(ni)?;
         for (p, topic) in &n.outputs {
             if !pubs.has(topic) {
                 let pb = dds_nodes[ni].make_publisher(topic, p.type_name, table.get(p.qos))?;
                 pubs.0.push((topic.clone(), pb));
+                if p.qos == QosClass::Sensor {
+                    sensor_topics.push(topic.clone());
+                }
                 log::info!("{}: publishes {topic} ({})", n.name, p.type_name);
             }
         }
     }
-    // DDS subscriptions for what comes from outside the process.
-    let externals = router.external_inputs();
-    for (k, (topic, p)) in externals.iter().enumerate() {
+    // DDS subscriptions for what comes from outside the process: topics no node here publishes,
+    // and the shared ones (tf, scan events) that others may publish too.
+    let mut externals: Vec<(String, Port, Arc<Vec<ros2_client::Gid>>)> =
+        router.external_inputs().into_iter().map(|(t, p)| (t, p, Arc::default())).collect();
+    for (topic, p) in router.shared_inputs() {
+        let own: Vec<ros2_client::Gid> = pubs.0.iter().filter(|(t, _)| *t == topic).map(|(_, pb)| pb.gid()).collect();
+        externals.push((topic, p, Arc::new(own)));
+    }
+    for (k, (topic, p, ignore)) in externals.iter().enumerate() {
         let ni = router.nodes().iter().position(|n| n.inputs.iter().any(|(_, t)| t == topic)).unwrap_or(0);
         let table = qos_of(ni)?;
         subscribe(
@@ -602,6 +630,7 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
             p.qos == QosClass::Sensor,
             k,
             feed.clone(),
+            ignore.clone(),
         )?;
         log::info!("{}: subscribed {topic} ({})", router.nodes()[ni].name, p.type_name);
     }
@@ -624,6 +653,7 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
             false,
             usize::MAX,
             feed.clone(),
+            Arc::default(),
         )?;
         Some((cctx, cnode))
     } else {
@@ -632,10 +662,24 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     drop(tx);
     drop(feed);
     let pub_errors = Arc::new(AtomicU64::new(0));
+    let publishers = PublishThreads::start(pubs, &sensor_topics, pub_errors.clone())?;
     {
         let pub_errors = pub_errors.clone();
+        let senders = publishers.senders.clone();
         router.set_tap(Box::new(move |topic, m| {
-            if let Err(e) = pubs.publish(topic, m) {
+            let Some((_, tx, droppable)) = senders.iter().find(|(t, _, _)| t == topic) else {
+                log::error!("no publisher on {topic}");
+                return;
+            };
+            let sent = if *droppable {
+                match tx.try_send(m.clone()) {
+                    Err(TrySendError::Full(_)) => Err("its publisher is behind: dropped".to_string()),
+                    r => r.map_err(|e| e.to_string()),
+                }
+            } else {
+                tx.send(m.clone()).map_err(|e| e.to_string())
+            };
+            if let Err(e) = sent {
                 let n = pub_errors.fetch_add(1, Ordering::Relaxed) + 1;
                 if n <= 5 || n.is_power_of_two() {
                     log::warn!("publish on {topic} failed ({n} so far): {e}");
@@ -678,7 +722,7 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     while !stop.load(Ordering::SeqCst) {
         match rx.recv_timeout(tick_period) {
             Ok(Event::Message(k, m)) => {
-                if let Some((topic, _)) = externals.get(k) {
+                if let Some((topic, _, _)) = externals.get(k) {
                     router.publish(topic, &m);
                 }
             }
@@ -708,6 +752,9 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     if d > 0 {
         log::warn!("{d} camera message(s) dropped while the node was busy");
     }
+    // The last outputs leave through the publisher threads before the count.
+    router.set_tap(Box::new(|_, _| {}));
+    publishers.join();
     let mut errors = pub_errors.load(Ordering::Relaxed);
     for n in router.nodes() {
         errors += n.errors;
@@ -737,6 +784,58 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
 /// Publishers by topic.
 #[derive(Default)]
 struct Publishers(Vec<(String, Pub)>);
+
+/// One thread per published topic, so that serializing and sending a large message (a growing
+/// cloud, a mesh, an image) never holds up the graph's loop nor another topic; each topic keeps
+/// its order. A camera stream (sensor QoS) whose thread falls behind drops the message (counted
+/// as a publish error, as best effort would); any other topic waits for its thread.
+struct PublishThreads {
+    /// `(topic, sender, droppable)`.
+    senders: Arc<Vec<(String, SyncSender<Msg>, bool)>>,
+    threads: Vec<std::thread::JoinHandle<()>>,
+}
+
+/// Messages queued per topic before a camera stream drops or another topic waits.
+const PUBLISH_QUEUE: usize = 8;
+
+impl PublishThreads {
+    fn start(pubs: Publishers, sensor_topics: &[String], errors: Arc<AtomicU64>) -> Result<Self, HostError> {
+        let mut senders = Vec::new();
+        let mut threads = Vec::new();
+        for (topic, pb) in pubs.0 {
+            let (tx, rx) = sync_channel::<Msg>(PUBLISH_QUEUE);
+            let errors = errors.clone();
+            let name = topic.clone();
+            threads.push(
+                std::thread::Builder::new()
+                    .name(format!("pub {topic}"))
+                    .spawn(move || {
+                        while let Ok(m) = rx.recv() {
+                            if let Err(e) = pb.publish(&m) {
+                                let n = errors.fetch_add(1, Ordering::Relaxed) + 1;
+                                if n <= 5 || n.is_power_of_two() {
+                                    log::warn!("publish on {name} failed ({n} so far): {e}");
+                                }
+                            }
+                        }
+                    })
+                    .map_err(|e| HostError::Dds(format!("thread: {e}")))?,
+            );
+            let droppable = sensor_topics.contains(&topic);
+            senders.push((topic, tx, droppable));
+        }
+        Ok(Self { senders: Arc::new(senders), threads })
+    }
+
+    /// Waits for every queued message to be published (the senders must be gone: the tap
+    /// replaced).
+    fn join(self) {
+        drop(self.senders);
+        for t in self.threads {
+            let _ = t.join();
+        }
+    }
+}
 
 impl Publishers {
     fn has(&self, topic: &str) -> bool {

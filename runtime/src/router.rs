@@ -37,6 +37,12 @@ impl Placed {
     }
 }
 
+/// True for a topic that ROS lets many nodes publish: `/tf`, `/tf_static` and the scan events
+/// (`xsurf_msgs/msg/ScanEvent`, "every node follows them whoever publishes").
+pub fn is_shared(topic: &str, type_name: &str) -> bool {
+    topic == "/tf" || topic == "/tf_static" || type_name == "xsurf_msgs/msg/ScanEvent"
+}
+
 /// Callback for every message published in the graph: `(topic, message)`.
 pub type Tap = Box<dyn FnMut(&str, &Msg)>;
 
@@ -142,6 +148,22 @@ impl Router {
         for n in &self.nodes {
             for (p, t) in &n.inputs {
                 if !outs.contains(t) && !v.iter().any(|(x, _)| x == t) {
+                    v.push((t.clone(), p.clone()));
+                }
+            }
+        }
+        v
+    }
+    /// Topics that some node subscribes to and some node of the graph publishes, but that ROS
+    /// lets any node publish ([`is_shared`]: `/tf`, `/tf_static`, scan events): publishers
+    /// outside the graph count as well, so a host subscribes to them too (and leaves out its own
+    /// publications).
+    pub fn shared_inputs(&self) -> Vec<(String, crate::component::Port)> {
+        let outs: std::collections::HashSet<String> = self.output_topics().into_iter().map(|(t, _)| t).collect();
+        let mut v: Vec<(String, crate::component::Port)> = Vec::new();
+        for n in &self.nodes {
+            for (p, t) in &n.inputs {
+                if outs.contains(t) && is_shared(t, p.type_name) && !v.iter().any(|(x, _)| x == t) {
                     v.push((t.clone(), p.clone()));
                 }
             }

@@ -554,6 +554,28 @@ mod tests {
         Msg::Tf(Arc::new(TFMessage { transforms: vec![convert::transform_stamped(0, "carm", child, e)] }))
     }
 
+    /// In a composed graph with c_arm_pose, the transforms and scan events it publishes are
+    /// still taken from outside too (a hospital controller's events, another tf publisher);
+    /// its other outputs are not.
+    #[test]
+    fn a_composed_graph_takes_tf_and_scan_events_from_outside_as_well() {
+        let mut r = Router::new();
+        for (node, ns) in [("c_arm_pose", "/"), ("triangulator", "/cam1"), ("merger", "/")] {
+            let p = Params::resolve(&declarations(node).unwrap(), &Default::default()).unwrap();
+            r.add(build(node, &p).unwrap(), node, ns, &[]);
+        }
+        let shared: Vec<String> = r.shared_inputs().into_iter().map(|(t, _)| t).collect();
+        assert_eq!(shared, ["/tf", "/tf_static", "/scan/events"]);
+        let external: Vec<String> = r.external_inputs().into_iter().map(|(t, _)| t).collect();
+        assert!(!external.iter().any(|t| shared.contains(t)), "{external:?}");
+        assert!(external.contains(&"/scan/request".to_string()) && external.contains(&"/cam1/laser_line".to_string()));
+        // /surface/placements goes from the merger to c_arm_pose in memory only.
+        assert!(
+            !external.contains(&"/surface/placements".to_string())
+                && !shared.contains(&"/surface/placements".to_string())
+        );
+    }
+
     #[test]
     fn refined_placements_replace_the_rig_between_scans_and_bad_ones_are_refused() {
         let (mut r, seen) = node(&[("auto_start", V::Bool(false))]);
