@@ -378,14 +378,36 @@ impl Mesh {
     }
 }
 
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+pub(crate) fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
-fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+pub(crate) fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
-fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+pub(crate) fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// True if the triangle `[pa, pb, pc]` has every edge within `max_edge` and its smallest angle
+/// at least `asin(sin_min)` (the mesher's test, also the zipper's).
+pub(crate) fn triangle_ok([pa, pb, pc]: [[f32; 3]; 3], max_edge: f32, sin_min: f32) -> bool {
+    let (ab, bc, ca) = (dist(pa, pb), dist(pb, pc), dist(pc, pa));
+    if ab > max_edge || bc > max_edge || ca > max_edge {
+        return false;
+    }
+    // Smallest angle is opposite the shortest edge: sin = 2*area / (product of the other two).
+    let area2 = {
+        let n = cross(sub(pb, pa), sub(pc, pa));
+        dot(n, n).sqrt()
+    };
+    let (e1, e2) = if ab <= bc && ab <= ca {
+        (bc, ca)
+    } else if bc <= ca {
+        (ab, ca)
+    } else {
+        (ab, bc)
+    };
+    e1 * e2 > 0.0 && area2 / (e1 * e2) >= sin_min
 }
 
 /// Colour of a vertex without camera colour: grey from the laser strength.
@@ -403,25 +425,7 @@ fn grid_triangles(grid: &Grid, cfg: &MeshConfig, mut emit: impl FnMut([usize; 3]
     let limit = |i: usize| cfg.max_edge_m + cfg.max_edge_per_m * grid.range()[i].max(0.0);
     // Accept a triangle of grid indices if its edges and angles pass.
     let ok = |a: usize, b: usize, c: usize| -> bool {
-        let (pa, pb, pc) = (pts[a], pts[b], pts[c]);
-        let lim = limit(a).min(limit(b)).min(limit(c));
-        let (ab, bc, ca) = (dist(pa, pb), dist(pb, pc), dist(pc, pa));
-        if ab > lim || bc > lim || ca > lim {
-            return false;
-        }
-        // Smallest angle is opposite the shortest edge: sin = 2*area / (product of the other two).
-        let area2 = {
-            let n = cross(sub(pb, pa), sub(pc, pa));
-            dot(n, n).sqrt()
-        };
-        let (e1, e2) = if ab <= bc && ab <= ca {
-            (bc, ca)
-        } else if bc <= ca {
-            (ab, ca)
-        } else {
-            (ab, bc)
-        };
-        e1 * e2 > 0.0 && area2 / (e1 * e2) >= sin_min
+        triangle_ok([pts[a], pts[b], pts[c]], limit(a).min(limit(b)).min(limit(c)), sin_min)
     };
     for f in 0..nf.saturating_sub(1) {
         for s in 0..ns.saturating_sub(1) {

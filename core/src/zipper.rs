@@ -9,7 +9,7 @@
 //! jump in depth is never bridged, and they keep the surface's orientation.
 
 use crate::cells::Cells;
-use crate::mesh::Mesh;
+use crate::mesh::{cross, dot, sub, triangle_ok, Mesh};
 use std::collections::HashSet;
 
 /// What the zipper did.
@@ -23,36 +23,13 @@ pub struct ZipperReport {
     pub closings: usize,
 }
 
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
 fn len(a: [f32; 3]) -> f32 {
     dot(a, a).sqrt()
 }
 
-/// True if triangle `(a, b, c)` has every edge within `max_edge` and its smallest angle at
-/// least `asin(sin_min)`.
+/// The mesher's test on triangle `(a, b, c)` of `p`.
 fn acceptable(p: &[[f32; 3]], [a, b, c]: [u32; 3], max_edge: f32, sin_min: f32) -> bool {
-    let (pa, pb, pc) = (p[a as usize], p[b as usize], p[c as usize]);
-    let (ab, bc, ca) = (len(sub(pb, pa)), len(sub(pc, pb)), len(sub(pa, pc)));
-    if ab > max_edge || bc > max_edge || ca > max_edge {
-        return false;
-    }
-    let area2 = len(cross(sub(pb, pa), sub(pc, pa)));
-    let (e1, e2) = if ab <= bc && ab <= ca {
-        (bc, ca)
-    } else if bc <= ca {
-        (ab, ca)
-    } else {
-        (ab, bc)
-    };
-    e1 * e2 > 0.0 && area2 / (e1 * e2) >= sin_min
+    triangle_ok([p[a as usize], p[b as usize], p[c as usize]], max_edge, sin_min)
 }
 
 /// Stitches the seams between the surfaces of different cameras in `mesh`, in place:
