@@ -306,6 +306,32 @@ impl Mesh {
             .collect();
     }
 
+    /// The triangles' corners by vertex: `corners[start[v]..start[v + 1]]` holds, for each
+    /// triangle `(v, b, c)` at `v` (in its own order), the pair `(b, c)`: the directed edge
+    /// `v -> b` and the third vertex.
+    pub(crate) fn corners(&self) -> (Vec<usize>, Vec<(u32, u32)>) {
+        let n = self.positions.len();
+        let mut start = vec![0usize; n + 1];
+        for t in &self.triangles {
+            for &v in t {
+                start[v as usize + 1] += 1;
+            }
+        }
+        for i in 0..n {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut corners = vec![(0u32, 0u32); start[n]];
+        for t in &self.triangles {
+            for k in 0..3 {
+                let a = t[k] as usize;
+                corners[fill[a]] = (t[(k + 1) % 3], t[(k + 2) % 3]);
+                fill[a] += 1;
+            }
+        }
+        (start, corners)
+    }
+
     /// Laplacian smoothing: each interior vertex moves `lambda` of the way to the mean of its
     /// neighbours, `iterations` times; vertices on a boundary edge stay put.
     pub fn smooth(&mut self, iterations: u32, lambda: f32) {
@@ -313,28 +339,11 @@ impl Mesh {
             return;
         }
         let n = self.positions.len();
-        // Each triangle lists, for each corner, the two other corners: a vertex's list then holds
-        // a neighbour once per triangle on their shared edge, so a neighbour listed once marks a
-        // boundary edge (no hash map: this runs on every merge).
-        let mut start = vec![0usize; n + 1];
-        for t in &self.triangles {
-            for &v in t {
-                start[v as usize + 1] += 2;
-            }
-        }
-        for i in 0..n {
-            start[i + 1] += start[i];
-        }
-        let mut fill = start.clone();
-        let mut listed = vec![0u32; start[n]];
-        for t in &self.triangles {
-            for k in 0..3 {
-                let a = t[k] as usize;
-                listed[fill[a]] = t[(k + 1) % 3];
-                listed[fill[a] + 1] = t[(k + 2) % 3];
-                fill[a] += 2;
-            }
-        }
+        // A vertex's corner list holds a neighbour once per triangle on their shared edge, so a
+        // neighbour listed once marks a boundary edge (no hash map: this runs on every merge).
+        let (start, corners) = self.corners();
+        let mut listed: Vec<u32> = corners.iter().flat_map(|&(b, c)| [b, c]).collect();
+        let start: Vec<usize> = start.iter().map(|&i| 2 * i).collect();
         // Interior vertices with their distinct neighbours (compressed adjacency).
         let mut interior: Vec<(u32, u32, u32)> = Vec::with_capacity(n);
         let mut adj: Vec<u32> = Vec::with_capacity(start[n] / 2);

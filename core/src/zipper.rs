@@ -44,24 +44,7 @@ pub fn zipper(mesh: &mut Mesh, camera: &[u8], max_edge_m: f32, min_angle_deg: f3
         return report;
     }
     // Directed edges a -> b per vertex, with the triangle's third vertex.
-    let mut start = vec![0usize; n + 1];
-    for t in &mesh.triangles {
-        for &v in t {
-            start[v as usize + 1] += 1;
-        }
-    }
-    for i in 0..n {
-        start[i + 1] += start[i];
-    }
-    let mut fill = start.clone();
-    let mut out = vec![(0u32, 0u32); start[n]];
-    for t in &mesh.triangles {
-        for k in 0..3 {
-            let a = t[k] as usize;
-            out[fill[a]] = (t[(k + 1) % 3], t[(k + 2) % 3]);
-            fill[a] += 1;
-        }
-    }
+    let (start, out) = mesh.corners();
     let has_edge = |a: u32, b: u32| out[start[a as usize]..start[a as usize + 1]].iter().any(|e| e.0 == b);
     // Boundary edges (a -> b with no b -> a), and the boundary vertices.
     let mut boundary: Vec<(u32, u32, u32)> = Vec::new();

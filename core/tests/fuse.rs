@@ -12,13 +12,14 @@ use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene};
 use xsurf_core::triangulate::TriangulatorConfig;
 use xsurf_core::zipper::zipper;
 
-#[test]
-fn fused_pyramid_has_one_layer_full_coverage_and_no_loss_of_accuracy() {
+/// The pyramid at 320x240 and 140 mm/s: the scanner, each camera's grid, and the points the
+/// cameras can observe (the truth).
+fn pyramid_scan() -> (Scanner, Vec<Grid>, Vec<xsurf_core::geom::Vec3>) {
     let rig = Rig::study(320, 240);
     let settings = ScanSettings { speed_mps: 0.14, ..Default::default() };
     let scanner =
         Scanner::new(Scene::by_name("pyramid").unwrap(), rig.clone(), LaserModel::default(), settings).unwrap();
-    let mut grids = common::camera_grids(&scanner, &rig);
+    let grids = common::camera_grids(&scanner, &rig);
     let min_angle = TriangulatorConfig::default().min_ray_plane_angle_deg;
     let mut truth = Vec::new();
     for ci in 0..rig.cameras.len() {
@@ -26,6 +27,12 @@ fn fused_pyramid_has_one_layer_full_coverage_and_no_loss_of_accuracy() {
             truth.extend(scanner.observable_points(ci, f, min_angle));
         }
     }
+    (scanner, grids, truth)
+}
+
+#[test]
+fn fused_pyramid_has_one_layer_full_coverage_and_no_loss_of_accuracy() {
+    let (scanner, mut grids, truth) = pyramid_scan();
     let all =
         |g: &[Grid]| g.iter().flat_map(|g| g.points().iter().copied().filter(|p| p[0].is_finite())).collect::<Vec<_>>();
     let before = all(&grids);
@@ -59,18 +66,7 @@ fn fused_pyramid_has_one_layer_full_coverage_and_no_loss_of_accuracy() {
 /// vertices), against both cameras meshed as they are before fusing (a double layer).
 #[test]
 fn zippered_pyramid_has_no_seam_gaps() {
-    let rig = Rig::study(320, 240);
-    let settings = ScanSettings { speed_mps: 0.14, ..Default::default() };
-    let scanner =
-        Scanner::new(Scene::by_name("pyramid").unwrap(), rig.clone(), LaserModel::default(), settings).unwrap();
-    let mut grids = common::camera_grids(&scanner, &rig);
-    let min_angle = TriangulatorConfig::default().min_ray_plane_angle_deg;
-    let mut truth = Vec::new();
-    for ci in 0..rig.cameras.len() {
-        for f in 0..scanner.frame_count() {
-            truth.extend(scanner.observable_points(ci, f, min_angle));
-        }
-    }
+    let (scanner, mut grids, truth) = pyramid_scan();
     let cfg = MeshConfig::default();
     let merged = |grids: &[Grid]| {
         let mut m = xsurf_core::mesh::Mesh::default();
