@@ -344,7 +344,7 @@ impl MergerNode {
             self.scan_id,
             pts.len(),
             merged.triangles.len(),
-            meshes.len()
+            gs.len()
         );
         self.last_merge = Some((self.scan_id, merged, meshes));
         self.merged_current = true;
