@@ -500,8 +500,13 @@ pub fn refine_grid(
     // Every other sample along each frame: the planes through them fit as well, and the tree
     // builds in half the time.
     let ns = reference.samples().max(1);
-    let (points, normals): (Vec<Vec3>, Vec<Vec3>) =
-        points.into_iter().zip(normals).enumerate().filter(|(i, _)| i % ns % 2 == 0).map(|(_, pn)| pn).unzip();
+    let (points, normals): (Vec<Vec3>, Vec<Vec3>) = points
+        .into_iter()
+        .zip(normals)
+        .enumerate()
+        .filter(|(i, _)| (i % ns).is_multiple_of(2))
+        .map(|(_, pn)| pn)
+        .unzip();
     let surface = Reference::new(&points, &normals)?;
     // The fit uses at most `max_points` observations, from the interior of the smoothed grid
     // (where every point was smoothed); each point's own travel puts it on a laser plane.
