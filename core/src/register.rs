@@ -512,16 +512,13 @@ pub fn refine_grid(
     // (where every point was smoothed); each point's own travel puts it on a laser plane.
     let (smoothed, interior) = smooth(grid);
     let step = interior.len().div_ceil(cfg.max_points.max(1)).max(1);
-    let optical_from_carm = carm_from_optical.inverse();
     let obs: Vec<Observation> = interior
         .iter()
         .step_by(step)
         .filter_map(|&i| {
             let p = smoothed[i];
             let v = Vec3::new(p[0].into(), p[1].into(), p[2].into());
-            let pose = motion.at(motion.travel_of(v, plane)?);
-            let ray = optical_from_carm.transform_point(pose.inverse().transform_point(v)).try_normalize()?;
-            Some(Observation { ray, table_from_carm: pose })
+            Observation::from_point(v, &motion.at(motion.travel_of(v, plane)?), carm_from_optical)
         })
         .collect();
     let report = refine_camera(&surface, &obs, carm_from_optical, plane, cfg)?;

@@ -78,12 +78,15 @@ pub fn zipper(mesh: &mut Mesh, camera: &[u8], max_edge_m: f32, min_angle_deg: f3
         [x, y, z]
     };
     for &(a, b, opp) in &boundary {
+        if camera[b as usize] != camera[a as usize] {
+            continue;
+        }
         let (pa, pb) = (p[a as usize], p[b as usize]);
         let normal = cross(sub(pb, pa), sub(p[opp as usize], pa));
         let mid = [0, 1, 2].map(|k| (pa[k] + pb[k]) / 2.0);
         let mut best: Option<(f32, u32)> = None;
         cells.within(&mid, max_edge_m, |c, _| {
-            if camera[c as usize] <= camera[a as usize] || camera[b as usize] != camera[a as usize] {
+            if camera[c as usize] <= camera[a as usize] {
                 return;
             }
             let tri = [b, a, c];
@@ -101,23 +104,21 @@ pub fn zipper(mesh: &mut Mesh, camera: &[u8], max_edge_m: f32, min_angle_deg: f3
         });
         if let Some((_, c)) = best {
             added.push(add(&mut used, [b, a, c]));
-            links.push((a.min(c), a.max(c)));
-            links.push((b.min(c), b.max(c)));
+            links.push((a, c));
+            links.push((b, c));
             report.bridges += 1;
         }
     }
     // Closings: a boundary edge d -> e of the higher-numbered camera whose ends both got a bridge
     // to one vertex v closes the fan with (e, d, v).
+    // Both directions, sorted: the vertices bridged to x are the run of (x, _).
+    let mut links: Vec<(u32, u32)> = links.iter().flat_map(|&(x, y)| [(x, y), (y, x)]).collect();
     links.sort_unstable();
     links.dedup();
-    let linked = |x: u32, y: u32| links.binary_search(&(x.min(y), x.max(y))).is_ok();
-    let bridged_to: Vec<Vec<u32>> = {
-        let mut v = vec![Vec::new(); n];
-        for &(x, y) in &links {
-            v[x as usize].push(y);
-            v[y as usize].push(x);
-        }
-        v
+    let linked = |x: u32, y: u32| links.binary_search(&(x, y)).is_ok();
+    let bridged_to = |x: u32| {
+        let from = links.partition_point(|&(a, _)| a < x);
+        links[from..].iter().take_while(move |&&(a, _)| a == x).map(|&(_, b)| b)
     };
     for &(d, e, opp) in &boundary {
         let cam = camera[d as usize];
@@ -129,7 +130,7 @@ pub fn zipper(mesh: &mut Mesh, camera: &[u8], max_edge_m: f32, min_angle_deg: f3
         let (pd, pe) = (p[d as usize], p[e as usize]);
         let normal = cross(sub(pe, pd), sub(p[opp as usize], pd));
         let mut best: Option<(bool, f32, u32)> = None;
-        for &v in bridged_to[d as usize].iter().chain(&bridged_to[e as usize]) {
+        for v in bridged_to(d).chain(bridged_to(e)) {
             let pv = p[v as usize];
             if camera[v as usize] >= cam
                 || dot(cross(sub(pd, pe), sub(pv, pe)), normal) <= 0.0

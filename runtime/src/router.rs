@@ -143,27 +143,26 @@ impl Router {
     }
     /// Topics some node subscribes to that no node of the graph publishes (they come from outside).
     pub fn external_inputs(&self) -> Vec<(String, crate::component::Port)> {
-        let outs: std::collections::HashSet<String> = self.output_topics().into_iter().map(|(t, _)| t).collect();
-        let mut v: Vec<(String, crate::component::Port)> = Vec::new();
-        for n in &self.nodes {
-            for (p, t) in &n.inputs {
-                if !outs.contains(t) && !v.iter().any(|(x, _)| x == t) {
-                    v.push((t.clone(), p.clone()));
-                }
-            }
-        }
-        v
+        self.inputs_where(|published, _, _| !published)
     }
     /// Topics that some node subscribes to and some node of the graph publishes, but that ROS
     /// lets any node publish ([`is_shared`]: `/tf`, `/tf_static`, scan events): publishers
     /// outside the graph count as well, so a host subscribes to them too (and leaves out its own
     /// publications).
     pub fn shared_inputs(&self) -> Vec<(String, crate::component::Port)> {
+        self.inputs_where(|published, topic, port| published && is_shared(topic, port.type_name))
+    }
+    /// Each subscribed topic once, with the first port on it, where `keep(published in the
+    /// graph, topic, port)`.
+    fn inputs_where(
+        &self,
+        keep: impl Fn(bool, &str, &crate::component::Port) -> bool,
+    ) -> Vec<(String, crate::component::Port)> {
         let outs: std::collections::HashSet<String> = self.output_topics().into_iter().map(|(t, _)| t).collect();
         let mut v: Vec<(String, crate::component::Port)> = Vec::new();
         for n in &self.nodes {
             for (p, t) in &n.inputs {
-                if outs.contains(t) && is_shared(t, p.type_name) && !v.iter().any(|(x, _)| x == t) {
+                if keep(outs.contains(t), t, p) && !v.iter().any(|(x, _)| x == t) {
                     v.push((t.clone(), p.clone()));
                 }
             }
