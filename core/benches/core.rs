@@ -25,6 +25,17 @@ fn byte_sum(data: &[u8]) -> u64 {
     data.chunks(128).map(|c| u64::from(c.iter().map(|&v| u16::from(v)).sum::<u16>())).sum()
 }
 
+/// What every detector does first on each row: the row's maximum and its first position (the
+/// strongest line). The floor under any detector's per-row cost on short rows.
+fn row_argmax(data: &[u8], w: usize) -> usize {
+    data.chunks_exact(w)
+        .map(|row| {
+            let max = row.iter().fold(0u8, |a, &b| a.max(b));
+            memchr::memchr(max, row).unwrap_or(0)
+        })
+        .sum()
+}
+
 fn edge_detection(c: &mut Criterion) {
     for (w, h) in [(320u32, 240u32), (640, 480), (1920, 1200)] {
         let mut g = c.benchmark_group(format!("edge_{w}x{h}"));
@@ -32,6 +43,7 @@ fn edge_detection(c: &mut Criterion) {
         let s = scanner(w, h, Encoding::Mono8);
         let img = s.render(0, s.frame_count() / 2);
         g.bench_function("byte_sum", |b| b.iter(|| byte_sum(black_box(&img.data))));
+        g.bench_function("row_argmax", |b| b.iter(|| row_argmax(black_box(&img.data), w as usize)));
         for m in [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic, Method::Gradient] {
             let mut d = EdgeDetector::new(EdgeConfig { method: m, ..Default::default() }).unwrap();
             let mut out = LaserLine::default();

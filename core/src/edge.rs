@@ -275,41 +275,155 @@ impl LaserLine {
 
 /// A sample type of a row profile.
 trait Sample: Copy + PartialOrd {
+    /// A level in the sample's own terms, so that walks compare without converting.
+    type Cut: Copy;
     fn f(self) -> f32;
-    /// Sum and sum of squares of a run.
-    fn moments(s: &[Self]) -> (f32, f32);
+    /// The cut that [`Sample::above`] compares with: `s.above(cut(l))` iff `s.f() > l`.
+    fn cut(level: f32) -> Self::Cut;
+    fn above(self, cut: Self::Cut) -> bool;
+    /// Sum and sum of squares of `p[start..end]`.
+    fn moments(p: &[Self], start: usize, end: usize) -> (f32, f32);
+    /// Sum of a run and its first moment about the run's start: (sum v, sum i v).
+    fn weighted(s: &[Self]) -> (f64, f64);
+    /// See [`extend_left`].
+    #[inline(always)]
+    fn extend_left(p: &[Self], from: usize, min: usize, cut: Self::Cut) -> usize {
+        from - p[min..from].iter().rev().take_while(|v| v.above(cut)).count()
+    }
+    /// See [`extend_right`].
+    #[inline(always)]
+    fn extend_right(p: &[Self], from: usize, max: usize, cut: Self::Cut) -> usize {
+        let end = (max + 1).min(p.len());
+        from + p[from + 1..end].iter().take_while(|v| v.above(cut)).count()
+    }
 }
+
+/// Lane masks for a flank loaded as 16 bytes: `FIRST[16 - k..][..16]` keeps the first `k` lanes,
+/// `LAST[k..][..16]` keeps the last `k`.
+const FIRST: [u8; 32] = {
+    let mut m = [0u8; 32];
+    let mut i = 0;
+    while i < 16 {
+        m[i] = 0xFF;
+        i += 1;
+    }
+    m
+};
+const LAST: [u8; 32] = {
+    let mut m = [0u8; 32];
+    let mut i = 16;
+    while i < 32 {
+        m[i] = 0xFF;
+        i += 1;
+    }
+    m
+};
+
+/// Sum and sum of squares of 16 bytes under a mask: vectorises (widen, multiply-add).
+#[inline(always)]
+fn masked_moments16(w: &[u8], mask: &[u8]) -> Option<(f32, f32)> {
+    let (w, mask): (&[u8; 16], &[u8; 16]) = (w.try_into().ok()?, mask.try_into().ok()?);
+    let a: u16 = w.iter().zip(mask).map(|(&v, &k)| u16::from(v & k)).sum();
+    let b: i32 = w.iter().zip(mask).map(|(&v, &k)| i32::from(i16::from(v & k)) * i32::from(i16::from(v & k))).sum();
+    Some((f32::from(a), b as f32))
+}
+
 impl Sample for u8 {
+    type Cut = i32;
     #[inline(always)]
     fn f(self) -> f32 {
         f32::from(self)
     }
-    /// Exact integer sums (a flank of at most 256 samples cannot overflow u32).
+    /// For an integer sample, `s > l` iff `s > floor(l)`. The shift by one makes the
+    /// truncating cast a floor; the clamp keeps it in range (NaN gives -1: every sample above).
     #[inline(always)]
-    fn moments(s: &[u8]) -> (f32, f32) {
+    fn cut(level: f32) -> i32 {
+        (level + 1.0).clamp(0.0, 256.0) as i32 - 1
+    }
+    #[inline(always)]
+    fn above(self, cut: i32) -> bool {
+        i32::from(self) > cut
+    }
+    /// Exact integer sums (a flank of at most 256 samples cannot overflow u32). A flank of up
+    /// to 16 samples is read as one 16-byte block with the other lanes masked off.
+    #[inline(always)]
+    fn moments(p: &[u8], start: usize, end: usize) -> (f32, f32) {
+        let k = end - start;
+        if k <= 16 {
+            let fast = if start + 16 <= p.len() {
+                masked_moments16(&p[start..start + 16], &FIRST[16 - k..32 - k])
+            } else if end >= 16 {
+                masked_moments16(&p[end - 16..end], &LAST[k..k + 16])
+            } else {
+                None
+            };
+            if let Some(m) = fast {
+                return m;
+            }
+        }
         let (mut a, mut b) = (0u32, 0u32);
-        for &v in s {
+        for &v in &p[start..end] {
             let x = u32::from(v);
             a += x;
             b += x * x;
         }
         (a as f32, b as f32)
     }
+    #[inline(always)]
+    fn weighted(s: &[u8]) -> (f64, f64) {
+        let (mut a, mut b) = (0u32, 0u32);
+        for (i, &v) in s.iter().enumerate() {
+            a += u32::from(v);
+            b += i as u32 * u32::from(v);
+        }
+        (f64::from(a), f64::from(b))
+    }
 }
 impl Sample for f32 {
+    type Cut = f32;
     #[inline(always)]
     fn f(self) -> f32 {
         self
     }
     #[inline(always)]
-    fn moments(s: &[f32]) -> (f32, f32) {
+    fn cut(level: f32) -> f32 {
+        level
+    }
+    #[inline(always)]
+    fn above(self, cut: f32) -> bool {
+        self > cut
+    }
+    #[inline(always)]
+    fn moments(p: &[f32], start: usize, end: usize) -> (f32, f32) {
         let (mut a, mut b) = (0.0f32, 0.0f32);
-        for &x in s {
+        for &x in &p[start..end] {
             a += x;
             b += x * x;
         }
         (a, b)
     }
+    #[inline(always)]
+    fn weighted(s: &[f32]) -> (f64, f64) {
+        let (mut a, mut b) = (0.0f64, 0.0f64);
+        for (i, &v) in s.iter().enumerate() {
+            a += f64::from(v);
+            b += i as f64 * f64::from(v);
+        }
+        (a, b)
+    }
+}
+
+/// The lowest `l` in `min..=from` with every sample of `p[l..from]` above `cut`.
+#[inline(always)]
+fn extend_left<S: Sample>(p: &[S], from: usize, min: usize, cut: S::Cut) -> usize {
+    S::extend_left(p, from, min, cut)
+}
+
+/// The highest `r` in `from..=max` (and inside `p`) with every sample of `p[from + 1..=r]`
+/// above `cut`.
+#[inline(always)]
+fn extend_right<S: Sample>(p: &[S], from: usize, max: usize, cut: S::Cut) -> usize {
+    S::extend_right(p, from, max, cut)
 }
 
 /// One located peak in a profile.
@@ -345,9 +459,9 @@ fn background<S: Sample>(p: &[S], m: usize, gap: usize, flank: usize) -> (f32, f
     let (mut sum, mut n, mut ss) = (0.0f32, 0usize, 0.0f32);
     if m > gap {
         let end = m - gap;
-        let side = &p[end.saturating_sub(flank)..end];
-        let (a, b) = S::moments(side);
-        let k = side.len();
+        let start = end.saturating_sub(flank);
+        let (a, b) = S::moments(p, start, end);
+        let k = end - start;
         if k > 0 {
             sum += a;
             n += k;
@@ -356,9 +470,9 @@ fn background<S: Sample>(p: &[S], m: usize, gap: usize, flank: usize) -> (f32, f
     }
     let start = m + gap + 1;
     if start < p.len() {
-        let side = &p[start..(start + flank).min(p.len())];
-        let (a, b) = S::moments(side);
-        let k = side.len();
+        let end = (start + flank).min(p.len());
+        let (a, b) = S::moments(p, start, end);
+        let k = end - start;
         sum += a;
         n += k;
         ss += b - a * a / k as f32;
@@ -395,15 +509,9 @@ fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturat
     // Wide enough that the flanks clear most lines on the first try.
     let gap0 = max_hw.min(6);
     let (bg0, noise0) = background(p, m, gap0, cfg.flank_px as usize);
-    let half0 = bg0 + 0.5 * (peak - bg0);
-    let mut lo = m;
-    while lo > 0 && m - lo < max_hw && p[lo - 1].f() > half0 {
-        lo -= 1;
-    }
-    let mut hi = m;
-    while hi + 1 < n && hi - m < max_hw && p[hi + 1].f() > half0 {
-        hi += 1;
-    }
+    let half0 = S::cut(bg0 + 0.5 * (peak - bg0));
+    let lo = extend_left(p, m, m.saturating_sub(max_hw), half0);
+    let hi = extend_right(p, m, m + max_hw, half0);
     let gap = (2 * (m - lo).max(hi - m) + 2).min(max_hw);
     // A narrower line keeps the first flanks (they are clear of it, only a little further out).
     let gap = gap.max(gap0);
@@ -414,13 +522,9 @@ fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturat
     }
     // Full width at half maximum.
     let half = bg + 0.5 * strength;
-    let (mut l, mut r) = if gap == gap0 { (lo, hi) } else { (m, m) };
-    while l > 0 && m - l <= max_hw && p[l - 1].f() > half {
-        l -= 1;
-    }
-    while r + 1 < n && r - m <= max_hw && p[r + 1].f() > half {
-        r += 1;
-    }
+    let (l, r) = if gap == gap0 { (lo, hi) } else { (m, m) };
+    let l = extend_left(p, l, m.saturating_sub(max_hw + 1), S::cut(half));
+    let r = extend_right(p, r, m + max_hw + 1, S::cut(half));
     let left = if l > 0 { crossing(p, l - 1, l, half) } else { l as f32 - 0.5 };
     let right = if r + 1 < n { crossing(p, r + 1, r, half) } else { r as f32 + 0.5 };
     let width = right - left;
@@ -444,25 +548,18 @@ fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturat
     Some(Peak { pos, strength, width, saturated })
 }
 
-/// Centre of gravity of the contiguous run around `m` above `threshold`.
+/// Centre of gravity of the contiguous run around `m` above `threshold`, weights
+/// `sample - threshold` (every sample of the run is above it, the peak included).
 fn center_of_gravity<S: Sample>(p: &[S], m: usize, threshold: f32, max_hw: usize) -> Option<f32> {
-    let mut lo = m;
-    while lo > 0 && m - lo < max_hw && p[lo - 1].f() > threshold {
-        lo -= 1;
-    }
-    let mut hi = m;
-    while hi + 1 < p.len() && hi - m < max_hw && p[hi + 1].f() > threshold {
-        hi += 1;
-    }
-    let (mut sw, mut swx) = (0.0f32, 0.0f32);
-    for (i, v) in p[lo..=hi].iter().enumerate() {
-        let w = v.f() - threshold;
-        if w > 0.0 {
-            sw += w;
-            swx += w * i as f32;
-        }
-    }
-    (sw > 0.0).then(|| lo as f32 + swx / sw)
+    let cut = S::cut(threshold);
+    let lo = extend_left(p, m, m.saturating_sub(max_hw), cut);
+    let hi = extend_right(p, m, m + max_hw, cut);
+    let (sv, sxv) = S::weighted(&p[lo..=hi]);
+    let k = (hi - lo + 1) as f64;
+    let t = f64::from(threshold);
+    let sw = sv - k * t;
+    let swx = sxv - t * k * (k - 1.0) / 2.0;
+    (sw > 0.0).then(|| lo as f32 + (swx / sw) as f32)
 }
 
 /// Gaussian fit: weighted least-squares parabola through ln(sample - background) around `m`,
@@ -687,6 +784,40 @@ fn side_colour(image: &ImageView<'_>, u: f32, v: f32, vertical: bool, offset: f3
 mod tests {
     use super::*;
     use crate::image::Image;
+
+    proptest::proptest! {
+        /// The byte path (masked 16-byte flanks, integer walks, integer sums) takes the same
+        /// decisions as the float path on the same samples, and finds the same centre.
+        #[test]
+        fn byte_and_float_profiles_agree(
+            n in 8usize..120,
+            c in 0.0f64..1.0,
+            sigma in 0.4f64..4.0,
+            amp in 0.0f64..260.0,
+            bg in 0.0f64..80.0,
+            noise in proptest::collection::vec(-12i32..12, 120),
+            method in 1usize..4,
+        ) {
+            let c = c * n as f64;
+            let row: Vec<u8> = (0..n)
+                .map(|i| {
+                    let d = (i as f64 - c) / sigma;
+                    (bg + amp * (-0.5 * d * d).exp() + f64::from(noise[i])).round().clamp(0.0, 255.0) as u8
+                })
+                .collect();
+            let float: Vec<f32> = row.iter().map(|&v| f32::from(v)).collect();
+            let method = [Method::Gradient, Method::CenterOfGravity, Method::Gaussian, Method::Parabolic][method];
+            let cfg = EdgeConfig { method, ..Default::default() };
+            let a = locate(&row, argmax_u8(&row), &cfg, 1.0, 255.0);
+            let b = locate(&float, argmax_f32(&float), &cfg, 1.0, 255.0);
+            proptest::prop_assert_eq!(a.is_some(), b.is_some(), "{:?} {:?} {:?}", row, a, b);
+            if let (Some(a), Some(b)) = (a, b) {
+                proptest::prop_assert!((a.pos - b.pos).abs() < 1e-3, "{:?} {:?}", a, b);
+                proptest::prop_assert!((a.width - b.width).abs() < 1e-4);
+                proptest::prop_assert_eq!(a.strength, b.strength);
+            }
+        }
+    }
 
     /// A mono8 image with a vertical Gaussian line at column `c` (box-integrated over each pixel).
     fn line_image(w: u32, h: u32, c: f64, sigma: f64, amp: f64, bg: f64) -> Image {
