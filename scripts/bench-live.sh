@@ -53,8 +53,10 @@ done
 .venv/bin/python - "$results" <<'PY'
 import json, sys
 rows = [json.loads(l) for l in open(sys.argv[1])]
-print("\n| run | frames expected (2 cams) | profiles | lost | p50 ms | p99 ms | max ms | CPU % (total) | peak RSS MiB (max) |")
-print("|---|---|---|---|---|---|---|---|---|")
+print("\nLatency image stamp -> profile: 'published' = the node's DDS write returned (XSURF_LATENCY_LOG);")
+print("'received' = a Cyclone DDS probe in Python took it (adds transport and the probe's scheduling).")
+print("\n| run | frames expected (2 cams) | profiles | lost | published p50 / p99 / max ms | received p50 / p99 / max ms | CPU % (total) | peak RSS MiB (max) |")
+print("|---|---|---|---|---|---|---|---|")
 for r in rows:
     c = r["cameras"]
     size = "640x480" if r["fps"] == 30 else "1920x1200"
@@ -64,8 +66,11 @@ for r in rows:
     p50 = max(v["latency_ms_p50"] for v in c.values())
     p99 = max(v["latency_ms_p99"] for v in c.values())
     mx = max(v["latency_ms_max"] for v in c.values())
+    q50 = max(v["publish_ms_p50"] for v in c.values())
+    q99 = max(v["publish_ms_p99"] for v in c.values())
+    qmx = max(v["publish_ms_max"] for v in c.values())
     cpu = sum(p["cpu_percent"] for p in r["processes"].values())
     rss = max((p["peak_rss_mib"] for p in r["processes"].values()), default=0)
-    print(f"| {size} @ {r['fps']:.0f} fps {r['mode']} | {exp} | {got} | {lost} | {p50} | {p99} | {mx} | {cpu:.0f} | {rss} |")
+    print(f"| {size} @ {r['fps']:.0f} fps {r['mode']} | {exp} | {got} | {lost} | {q50} / {q99} / {qmx} | {p50} / {p99} / {mx} | {cpu:.0f} | {rss} |")
 PY
 echo "details: $results" >&2

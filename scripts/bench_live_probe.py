@@ -6,8 +6,12 @@ SECONDS records every /camN/profile (PointCloud2) a Cyclone DDS probe receives: 
 the receive time minus the profile's stamp (= the image's exposure stamp, so it covers the image
 crossing DDS, edge detection, triangulation and the profile crossing DDS to the probe). Frames
 lost are the holes in each camera's stamp grid (the files source stamps at exact periods). CPU
-per process from /proc/<pid>/stat over the window, peak RSS (VmHWM) at its end. Prints one JSON
-line.
+per process from /proc/<pid>/stat over the window, peak RSS (VmHWM) at its end.
+
+The graph also logs, through XSURF_LATENCY_LOG, the moment each profile's DDS write returned in
+the node that published it: `publish_ms_*` is that time minus the stamp, over the same window,
+without the probe's own transport and Python scheduling (the `tf_baseline` figures show what
+those add). Prints one JSON line.
 usage: bench_live_probe.py BIN_DIR LAUNCH PARAMS MODE SECONDS FPS OUT
 """
 import json
@@ -101,7 +105,10 @@ def main(bin_dir, launch, params, mode, seconds, fps, out):
     if mode == "composed":
         args.insert(3, "--composed")
     log = open(out / f"launch-{mode}.log", "w")
-    proc = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, env=dict(os.environ, ROS_LOCALHOST_ONLY="1"))
+    latency_log = out / f"latency-{mode}.log"
+    latency_log.unlink(missing_ok=True)
+    env = dict(os.environ, ROS_LOCALHOST_ONLY="1", XSURF_LATENCY_LOG=str(latency_log))
+    proc = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, env=env)
     # Wait for the first profile from each camera.
     t_end = time.time() + 60
     seen = set()
@@ -116,6 +123,7 @@ def main(bin_dir, launch, params, mode, seconds, fps, out):
     pids = [p for p in descendants(proc.pid) if label(p)]
     cpu0 = {p: cpu(p) for p in pids}
     t0 = time.time()
+    t0_ns = time.time_ns()
     lat = {c: [] for c in readers}
     stamps = {c: [] for c in readers}
     while time.time() - t0 < seconds:
@@ -132,6 +140,7 @@ def main(bin_dir, launch, params, mode, seconds, fps, out):
                 tf_lat.append((time.time_ns() - (st.sec * 1_000_000_000 + st.nanosec)) / 1e6)
         time.sleep(0.0005)
     window = time.time() - t0
+    t1_ns = time.time_ns()
     procs = {}
     for p in pids:
         c1 = cpu(p)
@@ -145,6 +154,16 @@ def main(bin_dir, launch, params, mode, seconds, fps, out):
         code = -9
     period = 1e9 / fps
     result = {"tf_baseline_ms_p50": round(pct(tf_lat, 0.5) or -1, 2), "tf_baseline_ms_p99": round(pct(tf_lat, 0.99) or -1, 2), "mode": mode, "fps": fps, "window_s": round(window, 2), "launch_exit": code, "cameras": {}, "processes": procs}
+    published = {c: [] for c in readers}
+    if latency_log.exists():
+        for line in latency_log.read_text().splitlines():
+            parts = line.split()
+            if len(parts) != 3:
+                continue
+            topic, stamp, at = parts[0], int(parts[1]), int(parts[2])
+            c = topic.strip("/").split("/")[0]
+            if topic.endswith("/profile") and c in published and t0_ns <= at <= t1_ns:
+                published[c].append((at - stamp) / 1e6)
     for c in readers:
         st = sorted(set(stamps[c]))
         expected = int(round((st[-1] - st[0]) / period)) + 1 if st else 0
@@ -155,6 +174,10 @@ def main(bin_dir, launch, params, mode, seconds, fps, out):
             "latency_ms_p50": round(pct(lat[c], 0.5) or -1, 2),
             "latency_ms_p99": round(pct(lat[c], 0.99) or -1, 2),
             "latency_ms_max": round(max(lat[c]) if lat[c] else -1, 2),
+            "published": len(published[c]),
+            "publish_ms_p50": round(pct(published[c], 0.5) or -1, 2),
+            "publish_ms_p99": round(pct(published[c], 0.99) or -1, 2),
+            "publish_ms_max": round(max(published[c]) if published[c] else -1, 2),
         }
     text = (out / f"launch-{mode}.log").read_text(errors="replace")
     result["dropped_while_busy"] = [l.split("] ", 1)[-1] for l in text.splitlines() if "dropped while the node was busy" in l]

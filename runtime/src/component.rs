@@ -73,6 +73,21 @@ macro_rules! msg_types {
                 $(if type_name == <$t>::TYPE_NAME { return Some(<$t>::definition()); })*
                 None
             }
+            /// The message's stamp (ns since the epoch): its header's, a tf message's first
+            /// transform's; `None` for a clock or an empty tf message.
+            pub fn stamp_ns(&self) -> Option<i64> {
+                match self {
+                    Msg::Tf(m) => m.transforms.first().map(|t| t.header.stamp.nanos()),
+                    Msg::Clock(_) => None,
+                    Msg::Image(m) => Some(m.header.stamp.nanos()),
+                    Msg::CameraInfo(m) => Some(m.header.stamp.nanos()),
+                    Msg::LaserLine(m) => Some(m.header.stamp.nanos()),
+                    Msg::Cloud(m) => Some(m.header.stamp.nanos()),
+                    Msg::Marker(m) => Some(m.header.stamp.nanos()),
+                    Msg::ScanEvent(m) => Some(m.header.stamp.nanos()),
+                    Msg::JointState(m) => Some(m.header.stamp.nanos()),
+                }
+            }
             /// Every type name a [`Msg`] can carry.
             pub const TYPE_NAMES: &'static [&'static str] = &[$(<$t>::TYPE_NAME),*];
         }
@@ -166,6 +181,11 @@ pub trait Component: Send {
     fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError>;
     /// Called periodically with the node's clock (ns since the epoch).
     fn tick(&mut self, _now_ns: i64, _out: &mut Outbox) {}
+    /// When the node next needs a tick (ns on its clock), if it keeps a schedule of its own (a
+    /// camera's frame times): the host ticks it then rather than at its next periodic tick.
+    fn next_tick_ns(&self) -> Option<i64> {
+        None
+    }
     /// No more input is coming (end of a bag, or shutdown): flush what is pending.
     fn finish(&mut self, _out: &mut Outbox) {}
     /// Counters for reports and logs, as `(name, value)`.

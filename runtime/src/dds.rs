@@ -23,7 +23,7 @@ use std::net::Ipv4Addr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{sync_channel, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use xsurf_msgs::{
     rosgraph_msgs::Clock, sensor_msgs::CameraInfo, sensor_msgs::Image, sensor_msgs::JointState,
     sensor_msgs::PointCloud2, tf2_msgs::TFMessage, visualization_msgs::Marker, xsurf_msgs::LaserLine,
@@ -52,12 +52,16 @@ pub enum HostError {
 }
 
 /// The DDS domain and network settings from the ROS 2 environment variables.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct DdsEnv {
     /// `ROS_DOMAIN_ID` (0 when unset).
     pub domain_id: u16,
     /// `ROS_LOCALHOST_ONLY=1` or `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`.
     pub localhost_only: bool,
+    /// `XSURF_LATENCY_LOG`: a file that gets one line per message the host publishes,
+    /// `topic stamp_ns published_ns` (wall clock; `published` is when the DDS write returned).
+    /// Appended to, so that several processes can share it. For benchmarks.
+    pub latency_log: Option<std::path::PathBuf>,
 }
 
 impl DdsEnv {
@@ -78,7 +82,8 @@ impl DdsEnv {
         };
         let localhost_only = get("ROS_LOCALHOST_ONLY").is_some_and(|v| v.trim() == "1")
             || get("ROS_AUTOMATIC_DISCOVERY_RANGE").is_some_and(|v| v.trim().eq_ignore_ascii_case("LOCALHOST"));
-        Ok(DdsEnv { domain_id, localhost_only })
+        let latency_log = get("XSURF_LATENCY_LOG").filter(|v| !v.trim().is_empty()).map(std::path::PathBuf::from);
+        Ok(DdsEnv { domain_id, localhost_only, latency_log })
     }
 
     /// A ros2-client context for these settings.
@@ -662,11 +667,21 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     drop(tx);
     drop(feed);
     let pub_errors = Arc::new(AtomicU64::new(0));
-    let publishers = PublishThreads::start(pubs, &sensor_topics, pub_errors.clone())?;
-    {
+    let latency_log = match &env.latency_log {
+        Some(path) => Some(Arc::new(
+            std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(path)
+                .map_err(|e| HostError::Dds(format!("XSURF_LATENCY_LOG {}: {e}", path.display())))?,
+        )),
+        None => None,
+    };
+    let publishers = PublishThreads::start(pubs, &sensor_topics, pub_errors.clone(), latency_log)?;
+    let tap: crate::threads::SharedTap = {
         let pub_errors = pub_errors.clone();
         let senders = publishers.senders.clone();
-        router.set_tap(Box::new(move |topic, m| {
+        Arc::new(move |topic: &str, m: &Msg| {
             let Some((_, tx, droppable)) = senders.iter().find(|(t, _, _)| t == topic) else {
                 log::error!("no publisher on {topic}");
                 return;
@@ -685,8 +700,8 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
                     log::warn!("publish on {topic} failed ({n} so far): {e}");
                 }
             }
-        }));
-    }
+        })
+    };
     for dn in &mut dds_nodes {
         let spinner = dn.node.spinner().map_err(|e| HostError::Dds(format!("spinner: {e:?}")))?;
         std::thread::Builder::new()
@@ -703,60 +718,45 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
         ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
             .map_err(|e| HostError::Dds(format!("signal handler: {e}")))?;
     }
-    let tick_period = configs.iter().map(|c| c.0.tick_period).min().unwrap_or(Duration::from_millis(50));
-    let mut clock_ns: Option<i64> = None;
-    let mut last_tick = Instant::now();
-    let now_ns = |clock: Option<i64>| -> i64 {
-        if sim_time {
-            clock.unwrap_or(0)
-        } else {
-            std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as i64)
-        }
-    };
+    let node_count = router.nodes().len();
+    let ticks: Vec<Duration> = configs.iter().map(|c| c.0.tick_period).collect();
+    let graph = crate::threads::Threads::start(router, tap, &ticks, sim_time)
+        .map_err(|e| HostError::Dds(format!("thread: {e}")))?;
     log::info!(
-        "{} node(s) running (domain {}, {})",
-        router.nodes().len(),
+        "{} node(s) running, a thread each (domain {}, {})",
+        node_count,
         env.domain_id,
         if env.localhost_only { "localhost only" } else { "all interfaces" }
     );
     while !stop.load(Ordering::SeqCst) {
-        match rx.recv_timeout(tick_period) {
+        match rx.recv_timeout(Duration::from_millis(100)) {
             Ok(Event::Message(k, m)) => {
                 if let Some((topic, _, _)) = externals.get(k) {
-                    router.publish(topic, &m);
+                    graph.publish(topic, &m);
                 }
             }
-            Ok(Event::Clock(t)) => clock_ns = Some(t),
+            Ok(Event::Clock(t)) => graph.clock(t),
             Ok(Event::Reconfigure(ni, name, v)) => {
                 let Some((cfg, params)) = configs.get_mut(ni) else { continue };
                 if params.set(&cfg.decls, &name, v).is_ok() {
-                    match router.reconfigure(ni, params) {
-                        Ok(()) => log::info!("{}: parameter {name} set", cfg.name),
-                        Err(e) => log::warn!("{}: parameter {name} refused: {e}", cfg.name),
-                    }
+                    graph.reconfigure(ni, params, &name);
                 }
             }
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => break,
         }
-        // With simulated time, time does not start before the first /clock message.
-        if last_tick.elapsed() >= tick_period && (!sim_time || clock_ns.is_some()) {
-            last_tick = Instant::now();
-            router.tick(now_ns(clock_ns));
-        }
     }
     log::info!("shutting down");
     stop.store(true, Ordering::SeqCst);
-    router.finish();
-    let d = dropped.load(Ordering::Relaxed);
+    let d = dropped.load(Ordering::Relaxed) + graph.dropped();
+    let nodes = graph.finish();
     if d > 0 {
-        log::warn!("{d} camera message(s) dropped while the node was busy");
+        log::warn!("{d} camera message(s) dropped while a node was busy");
     }
     // The last outputs leave through the publisher threads before the count.
-    router.set_tap(Box::new(|_, _| {}));
     publishers.join();
     let mut errors = pub_errors.load(Ordering::Relaxed);
-    for n in router.nodes() {
+    for n in &nodes {
         errors += n.errors;
         for (k, v) in n.component.counters() {
             log::info!("{}: {k} = {v}", n.fq_name());
@@ -775,7 +775,7 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     for dn in &dds_nodes {
         dn.node.stop_spinner();
     }
-    drop(router);
+    drop(nodes);
     drop(dds_nodes);
     drop(ctx);
     Ok(errors)
@@ -799,13 +799,19 @@ struct PublishThreads {
 const PUBLISH_QUEUE: usize = 8;
 
 impl PublishThreads {
-    fn start(pubs: Publishers, sensor_topics: &[String], errors: Arc<AtomicU64>) -> Result<Self, HostError> {
+    fn start(
+        pubs: Publishers,
+        sensor_topics: &[String],
+        errors: Arc<AtomicU64>,
+        latency_log: Option<Arc<std::fs::File>>,
+    ) -> Result<Self, HostError> {
         let mut senders = Vec::new();
         let mut threads = Vec::new();
         for (topic, pb) in pubs.0 {
             let (tx, rx) = sync_channel::<Msg>(PUBLISH_QUEUE);
             let errors = errors.clone();
             let name = topic.clone();
+            let latency_log = latency_log.clone();
             threads.push(
                 std::thread::Builder::new()
                     .name(format!("pub {topic}"))
@@ -816,6 +822,8 @@ impl PublishThreads {
                                 if n <= 5 || n.is_power_of_two() {
                                     log::warn!("publish on {name} failed ({n} so far): {e}");
                                 }
+                            } else if let (Some(file), Some(stamp)) = (&latency_log, m.stamp_ns()) {
+                                log_latency(file, &name, stamp);
                             }
                         }
                     })
@@ -837,6 +845,15 @@ impl PublishThreads {
     }
 }
 
+/// Appends `topic stamp_ns now_ns` to the latency log in one write (appends of one short line
+/// from several threads or processes do not interleave). A failed write is ignored: the log is
+/// a measurement, not the node's output.
+fn log_latency(mut file: &std::fs::File, topic: &str, stamp_ns: i64) {
+    use std::io::Write;
+    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    let _ = file.write_all(format!("{topic} {stamp_ns} {now}\n").as_bytes());
+}
+
 impl Publishers {
     fn has(&self, topic: &str) -> bool {
         self.0.iter().any(|(t, _)| t == topic)
@@ -856,10 +873,13 @@ mod tests {
         let env = |pairs: &'static [(&'static str, &'static str)]| {
             move |k: &str| pairs.iter().find(|p| p.0 == k).map(|p| p.1.to_string())
         };
-        assert_eq!(DdsEnv::from_env(env(&[])).unwrap(), DdsEnv { domain_id: 0, localhost_only: false });
+        assert_eq!(
+            DdsEnv::from_env(env(&[])).unwrap(),
+            DdsEnv { domain_id: 0, localhost_only: false, latency_log: None }
+        );
         assert_eq!(
             DdsEnv::from_env(env(&[("ROS_DOMAIN_ID", "42"), ("ROS_LOCALHOST_ONLY", "1")])).unwrap(),
-            DdsEnv { domain_id: 42, localhost_only: true }
+            DdsEnv { domain_id: 42, localhost_only: true, latency_log: None }
         );
         assert!(DdsEnv::from_env(env(&[("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")])).unwrap().localhost_only);
         assert!(DdsEnv::from_env(env(&[("ROS_DOMAIN_ID", "300")])).is_err());

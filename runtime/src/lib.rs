@@ -2,7 +2,8 @@
 //!
 //! Hosting for xsurf's nodes: the ROS 2 command line and params files ([`rosargs`]),
 //! parameter values and declarations ([`params`]), the transport-agnostic component API
-//! ([`component`]) and the in-memory composition of several components ([`router`]).
+//! ([`component`]), the in-memory composition of several components ([`router`], single-threaded
+//! and deterministic, for bags), and the live executor with a thread per node ([`threads`]).
 #![deny(missing_docs)]
 
 pub mod component;
@@ -11,3 +12,4 @@ pub mod logging;
 pub mod params;
 pub mod rosargs;
 pub mod router;
+pub mod threads;

@@ -1,7 +1,11 @@
 //! Several components in one process, connected in memory: a published message is handed to
-//! every subscriber before the publish call returns (depth first, no queue, so nothing can be
-//! dropped), and to an optional tap that forwards every output to outside observers (DDS, a
-//! bag).
+//! every subscriber before the publish call returns (nothing can be dropped), and to an optional
+//! tap that forwards every output to outside observers (DDS, a bag) as soon as its node returns.
+//!
+//! Delivery is breadth first, through one FIFO queue: messages are handled in the order they were
+//! published, so every topic keeps its order and a cause is handled before its effects. A tick
+//! lets every node publish first (two cameras' frames leave together) and only then handles what
+//! they published, so one camera's frame does not wait behind the other's whole chain.
 
 use crate::component::{Component, Msg, Outbox, Port};
 use crate::params::Params;
@@ -52,6 +56,8 @@ pub struct Router {
     nodes: Vec<Placed>,
     subs: HashMap<String, Vec<(usize, usize)>>,
     tap: Option<Tap>,
+    /// Published, not yet handled: `(topic, message)`.
+    queue: std::collections::VecDeque<(String, Msg)>,
 }
 
 impl Router {
@@ -93,6 +99,10 @@ impl Router {
     pub fn nodes(&self) -> &[Placed] {
         &self.nodes
     }
+    /// The nodes, taken out of the graph (to run them on threads of their own).
+    pub fn into_nodes(self) -> Vec<Placed> {
+        self.nodes
+    }
     /// A node, mutably (to reconfigure it).
     pub fn node_mut(&mut self, idx: usize) -> Option<&mut Placed> {
         self.nodes.get_mut(idx)
@@ -101,30 +111,39 @@ impl Router {
     pub fn has_subscriber(&self, topic: &str) -> bool {
         self.subs.contains_key(topic)
     }
-    /// Delivers a message that came from outside the graph (a bag, DDS) to its subscribers;
-    /// the tap does not see it (it is not the graph's own output).
+    /// Delivers a message that came from outside the graph (a bag, DDS) to its subscribers, and
+    /// everything they publish in turn, before it returns; the tap does not see it (it is not
+    /// the graph's own output).
     pub fn publish(&mut self, topic: &str, msg: &Msg) {
-        let Some(subs) = self.subs.get(topic).cloned() else { return };
-        for (node, input) in subs {
-            let mut out = Outbox::default();
-            let n = &mut self.nodes[node];
-            n.handled += 1;
-            let t0 = std::time::Instant::now();
-            let r = n.component.handle(input, msg, &mut out);
-            n.busy_ns += t0.elapsed().as_nanos() as u64;
-            if let Err(e) = r {
-                n.errors += 1;
-                // The first few are logged; all are counted, and the last is kept for reports.
-                if n.errors <= 5 {
-                    log::warn!("{}: message on {topic} refused: {e}", n.fq_name());
-                } else if n.errors == 6 {
-                    log::warn!("{}: more messages refused; counting them quietly", n.fq_name());
+        self.queue.push_back((topic.to_string(), msg.clone()));
+        self.drain();
+    }
+    /// Handles queued messages until none is left.
+    fn drain(&mut self) {
+        while let Some((topic, msg)) = self.queue.pop_front() {
+            let Some(subs) = self.subs.get(&topic).cloned() else { continue };
+            for (node, input) in subs {
+                let mut out = Outbox::default();
+                let n = &mut self.nodes[node];
+                n.handled += 1;
+                let t0 = std::time::Instant::now();
+                let r = n.component.handle(input, &msg, &mut out);
+                n.busy_ns += t0.elapsed().as_nanos() as u64;
+                if let Err(e) = r {
+                    n.errors += 1;
+                    // The first few are logged; all are counted, and the last is kept for reports.
+                    if n.errors <= 5 {
+                        log::warn!("{}: message on {topic} refused: {e}", n.fq_name());
+                    } else if n.errors == 6 {
+                        log::warn!("{}: more messages refused; counting them quietly", n.fq_name());
+                    }
+                    n.last_error = Some(format!("{topic}: {e}"));
                 }
-                n.last_error = Some(format!("{topic}: {e}"));
+                self.deliver(node, out);
             }
-            self.deliver(node, out);
         }
     }
+    /// Taps and queues what node `node` published.
     fn deliver(&mut self, node: usize, out: Outbox) {
         for (port, msg) in out.items {
             let Some((_, topic)) = self.nodes[node].outputs.get(port).cloned() else {
@@ -134,7 +153,7 @@ impl Router {
             if let Some(tap) = self.tap.as_mut() {
                 tap(&topic, &msg);
             }
-            self.publish(&topic, &msg);
+            self.queue.push_back((topic, msg));
         }
     }
     /// Topics some node of the graph publishes.
@@ -169,7 +188,11 @@ impl Router {
         }
         v
     }
-    /// Ticks every node with the graph's clock.
+    /// The earliest tick some node asked for ([`Component::next_tick_ns`]).
+    pub fn next_tick_ns(&self) -> Option<i64> {
+        self.nodes.iter().filter_map(|n| n.component.next_tick_ns()).min()
+    }
+    /// Ticks every node with the graph's clock, then handles what they published.
     pub fn tick(&mut self, now_ns: i64) {
         for i in 0..self.nodes.len() {
             let mut out = Outbox::default();
@@ -178,6 +201,7 @@ impl Router {
             self.nodes[i].busy_ns += t0.elapsed().as_nanos() as u64;
             self.deliver(i, out);
         }
+        self.drain();
     }
     /// Tells every node, in the order they were added, that no more input is coming.
     pub fn finish(&mut self) {
@@ -187,6 +211,7 @@ impl Router {
             self.nodes[i].component.finish(&mut out);
             self.nodes[i].busy_ns += t0.elapsed().as_nanos() as u64;
             self.deliver(i, out);
+            self.drain();
         }
     }
     /// Applies parameters to node `idx` (validated by the component).
@@ -195,5 +220,88 @@ impl Router {
             Some(n) => n.component.reconfigure(params),
             None => Err(crate::params::ParamError::Undeclared(format!("node {idx}"))),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::component::{NodeError, QosClass};
+    use crate::params::{ParamDecl, ParamError};
+    use std::sync::{Arc, Mutex};
+    use xsurf_msgs::sensor_msgs::Image;
+    use xsurf_msgs::RosMessage;
+
+    /// A source (publishes one image per tick on `out`) or a relay (`input` -> `out`).
+    struct Node {
+        input: Option<&'static str>,
+        out: &'static str,
+        seen: Arc<Mutex<Vec<String>>>,
+    }
+    fn image(tag: u32) -> Msg {
+        Msg::Image(Arc::new(Image { width: tag, ..Default::default() }))
+    }
+    fn tag(m: &Msg) -> u32 {
+        match m {
+            Msg::Image(i) => i.width,
+            _ => u32::MAX,
+        }
+    }
+    impl Component for Node {
+        fn node_name(&self) -> &'static str {
+            "n"
+        }
+        fn inputs(&self) -> Vec<Port> {
+            self.input.iter().map(|t| Port::new(t, Image::TYPE_NAME, QosClass::Reliable)).collect()
+        }
+        fn outputs(&self) -> Vec<Port> {
+            vec![Port::new(self.out, Image::TYPE_NAME, QosClass::Reliable)]
+        }
+        fn declarations(&self) -> Vec<ParamDecl> {
+            Vec::new()
+        }
+        fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
+            Ok(())
+        }
+        fn handle(&mut self, _: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+            self.seen.lock().unwrap().push(format!("{} {}", self.out, tag(msg)));
+            // Two outputs per input: their order must hold downstream.
+            out.publish(0, image(tag(msg) * 10));
+            out.publish(0, image(tag(msg) * 10 + 1));
+            Ok(())
+        }
+        fn tick(&mut self, _: i64, out: &mut Outbox) {
+            if self.input.is_none() {
+                out.publish(0, image(if self.out == "/a" { 1 } else { 2 }));
+            }
+        }
+    }
+
+    #[test]
+    fn a_tick_publishes_every_source_first_and_keeps_order() {
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let tapped = Arc::new(Mutex::new(Vec::new()));
+        let mut r = Router::new();
+        let node = |input, out| Box::new(Node { input, out, seen: seen.clone() });
+        r.add(node(None, "/a"), "a", "/", &[]);
+        r.add(node(None, "/b"), "b", "/", &[]);
+        r.add(node(Some("/a"), "/a2"), "a2", "/", &[]);
+        r.add(node(Some("/b"), "/b2"), "b2", "/", &[]);
+        r.add(node(Some("/a2"), "/a3"), "a3", "/", &[]);
+        let t = tapped.clone();
+        r.set_tap(Box::new(move |topic, m| t.lock().unwrap().push(format!("{topic} {}", tag(m)))));
+        r.tick(0);
+        let tapped = tapped.lock().unwrap().clone();
+        // Both sources' frames leave before anything is made from either.
+        assert_eq!(&tapped[..2], ["/a 1", "/b 2"]);
+        // b's first product is not held back behind a's second stage.
+        let pos = |s: &str| tapped.iter().position(|x| x == s).unwrap();
+        assert!(pos("/b2 20") < pos("/a3 100"), "{tapped:?}");
+        // Each topic keeps its order, and every message is handled exactly once.
+        assert_eq!(*seen.lock().unwrap(), ["/a2 1", "/b2 2", "/a3 10", "/a3 11"]);
+        assert_eq!(tapped.len(), 2 + 4 + 4);
+        // A message from outside is handled, with all it causes, before publish returns.
+        r.publish("/a2", &image(7));
+        assert_eq!(seen.lock().unwrap().last().unwrap(), "/a3 7");
     }
 }

@@ -247,7 +247,6 @@ pub struct CameraDriverNode {
     frames: u64,
     skipped: u64,
     next_file: usize,
-    first_ns: Option<i64>,
     read_errors: u64,
     /// Files source: decoded frames kept for the next round of a loop (up to `CACHE_BYTES`).
     cache: Vec<Option<Arc<xsurf_core::image::Image>>>,
@@ -273,7 +272,6 @@ impl CameraDriverNode {
             frames: 0,
             skipped: 0,
             next_file: 0,
-            first_ns: None,
             read_errors: 0,
             cache: Vec::new(),
             cache_bytes: 0,
@@ -361,6 +359,10 @@ impl Component for CameraDriverNode {
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
         }
     }
+    /// The next frame's time, so that a frame leaves on time rather than at the host's next tick.
+    fn next_tick_ns(&self) -> Option<i64> {
+        self.next_ns
+    }
     fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
         let next = *self.next_ns.get_or_insert(now_ns);
         if now_ns < next {
@@ -369,7 +371,10 @@ impl Component for CameraDriverNode {
         // Stay on the frame grid; frames the host could not render in time are counted.
         let behind = (now_ns - next) / self.cfg.period_ns;
         self.skipped += behind as u64;
-        self.next_ns = Some(next + (behind + 1) * self.cfg.period_ns);
+        // The slot this frame fills: a late host skips slots (the counter) rather than letting
+        // the stamps fall behind the clock the C-arm's pose is on.
+        let slot = next + behind * self.cfg.period_ns;
+        self.next_ns = Some(slot + self.cfg.period_ns);
         if let Source::Files { list, stamps, repeat } = &self.cfg.source {
             let mut i = self.next_file;
             if i >= list.len() {
@@ -379,10 +384,9 @@ impl Component for CameraDriverNode {
                 i = 0;
             }
             self.next_file = i + 1;
-            let first = *self.first_ns.get_or_insert(now_ns);
             let stamp = match stamps {
                 Some(s) => s[i],
-                None => first + ((self.frames + self.read_errors) as f64 * self.cfg.period_ns as f64) as i64,
+                None => slot,
             };
             if self.cache.len() != list.len() {
                 self.cache = vec![None; list.len()];

@@ -1,0 +1,399 @@
+//! The live graph's executor: every component of a process on a thread of its own, connected in
+//! memory (an `Arc` per message, no copy), as a multi-threaded ROS 2 component container.
+//!
+//! A node's slow work (a growing cloud, a mesh at END, the merge) then holds up only that node:
+//! the cameras keep their frame times and the other camera's chain runs on the other core. Each
+//! node thread ticks itself: at its tick period, or earlier when the component asks
+//! ([`Component::next_tick_ns`]), so a camera's frame leaves on time.
+//!
+//! Delivery: one FIFO inbox per node, so every topic keeps its order. Camera streams (sensor QoS)
+//! are best effort here as over DDS: a node that already has [`SENSOR_BACKLOG`] of them waiting
+//! drops the next one and counts it. Other messages always queue (they are small and rare next to
+//! the frames: lines, profiles, clouds at a few hertz, events).
+//!
+//! Offline (a bag, `xsurf reconstruct`) the single-threaded [`crate::router::Router`] runs the same
+//! components deterministically.
+
+use crate::component::{Msg, Outbox, QosClass};
+use crate::params::Params;
+use crate::router::{Placed, Router};
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::mpsc::{channel, sync_channel, Receiver, RecvTimeoutError, Sender, SyncSender};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// Camera-stream messages a node may have waiting before the next one is dropped.
+pub const SENSOR_BACKLOG: usize = 4;
+
+/// Forwards every message a node publishes to outside observers (DDS, a bag).
+pub type SharedTap = Arc<dyn Fn(&str, &Msg) + Send + Sync>;
+
+/// Work for a node's thread.
+enum Work {
+    /// A message on input `usize`; `true` for a camera stream.
+    Input(usize, Msg, bool),
+    /// The simulated clock (`use_sim_time`).
+    Clock(i64),
+    /// A parameter set (already applied to the node's parameters) and the name that changed.
+    Reconfigure(Box<Params>, String),
+    /// No more input: flush, then acknowledge.
+    Finish(SyncSender<()>),
+    /// Leave the thread.
+    Stop,
+}
+
+/// A node's inbox.
+struct Inbox {
+    tx: Sender<Work>,
+    /// Camera-stream messages waiting.
+    sensor_waiting: AtomicUsize,
+    /// Camera-stream messages dropped because the node was behind.
+    dropped: AtomicU64,
+}
+
+/// One subscription: node, its input, and whether the topic is a camera stream.
+#[derive(Clone, Copy)]
+struct Sub {
+    node: usize,
+    input: usize,
+    sensor: bool,
+}
+
+/// Where messages go: the tap, and each topic's subscribers.
+#[derive(Clone)]
+struct Fabric {
+    inboxes: Arc<Vec<Inbox>>,
+    subs: Arc<HashMap<String, Vec<Sub>>>,
+    tap: SharedTap,
+}
+
+impl Fabric {
+    /// Hands `msg` to every subscriber of `topic` (and to the tap if it is the graph's own).
+    fn emit(&self, topic: &str, msg: &Msg, own: bool) {
+        if own {
+            (self.tap)(topic, msg);
+        }
+        let Some(subs) = self.subs.get(topic) else { return };
+        for &Sub { node, input, sensor } in subs {
+            let inbox = &self.inboxes[node];
+            if sensor && inbox.sensor_waiting.fetch_add(1, Ordering::AcqRel) >= SENSOR_BACKLOG {
+                inbox.sensor_waiting.fetch_sub(1, Ordering::AcqRel);
+                inbox.dropped.fetch_add(1, Ordering::Relaxed);
+                continue;
+            }
+            // A node whose thread has left (after shutdown) simply gets nothing more.
+            let _ = inbox.tx.send(Work::Input(input, msg.clone(), sensor));
+        }
+    }
+}
+
+/// A node's place in the executor.
+struct Runner {
+    placed: Placed,
+    index: usize,
+    tick_period: Duration,
+    sim_time: bool,
+    fabric: Fabric,
+}
+
+impl Runner {
+    fn publish(&mut self, out: Outbox) {
+        for (port, msg) in out.items {
+            match self.placed.outputs.get(port) {
+                Some((_, topic)) => self.fabric.emit(topic, &msg, true),
+                None => log::error!("{}: published on undeclared output {port}", self.placed.fq_name()),
+            }
+        }
+    }
+
+    fn handle(&mut self, input: usize, msg: &Msg) {
+        let mut out = Outbox::default();
+        let n = &mut self.placed;
+        n.handled += 1;
+        let t0 = Instant::now();
+        let r = n.component.handle(input, msg, &mut out);
+        n.busy_ns += t0.elapsed().as_nanos() as u64;
+        if let Err(e) = r {
+            n.errors += 1;
+            let topic = n.inputs.get(input).map_or("?", |(_, t)| t.as_str()).to_string();
+            if n.errors <= 5 {
+                log::warn!("{}: message on {topic} refused: {e}", n.fq_name());
+            } else if n.errors == 6 {
+                log::warn!("{}: more messages refused; counting them quietly", n.fq_name());
+            }
+            n.last_error = Some(format!("{topic}: {e}"));
+        }
+        self.publish(out);
+    }
+
+    fn run(mut self, rx: Receiver<Work>) -> Placed {
+        let wall =
+            || std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as i64);
+        let mut clock: Option<i64> = None;
+        let mut last_tick = Instant::now();
+        let mut finished = false;
+        loop {
+            let wake = if self.sim_time || finished { None } else { self.placed.component.next_tick_ns() };
+            let timeout = match wake {
+                Some(w) => self.tick_period.min(Duration::from_nanos((w - wall()).max(0) as u64)),
+                None => self.tick_period,
+            };
+            match rx.recv_timeout(timeout) {
+                Ok(Work::Input(input, msg, sensor)) => {
+                    if sensor {
+                        self.fabric.inboxes[self.index].sensor_waiting.fetch_sub(1, Ordering::AcqRel);
+                    }
+                    self.handle(input, &msg);
+                }
+                Ok(Work::Clock(t)) => clock = Some(t),
+                Ok(Work::Reconfigure(params, name)) => match self.placed.component.reconfigure(&params) {
+                    Ok(()) => log::info!("{}: parameter {name} set", self.placed.name),
+                    Err(e) => log::warn!("{}: parameter {name} refused: {e}", self.placed.name),
+                },
+                Ok(Work::Finish(ack)) => {
+                    finished = true;
+                    let mut out = Outbox::default();
+                    let t0 = Instant::now();
+                    self.placed.component.finish(&mut out);
+                    self.placed.busy_ns += t0.elapsed().as_nanos() as u64;
+                    self.publish(out);
+                    let _ = ack.send(());
+                }
+                Ok(Work::Stop) | Err(RecvTimeoutError::Disconnected) => break,
+                Err(RecvTimeoutError::Timeout) => {}
+            }
+            if finished {
+                continue;
+            }
+            // With simulated time, time does not start before the first /clock message.
+            let now = if self.sim_time { clock } else { Some(wall()) };
+            let due = wake.is_some_and(|w| now.is_some_and(|n| n >= w));
+            if let Some(now) = now.filter(|_| due || last_tick.elapsed() >= self.tick_period) {
+                last_tick = Instant::now();
+                let mut out = Outbox::default();
+                let t0 = Instant::now();
+                self.placed.component.tick(now, &mut out);
+                self.placed.busy_ns += t0.elapsed().as_nanos() as u64;
+                self.publish(out);
+            }
+        }
+        self.placed
+    }
+}
+
+/// The running executor.
+pub struct Threads {
+    fabric: Fabric,
+    threads: Vec<JoinHandle<Placed>>,
+}
+
+impl Threads {
+    /// Starts one thread per node of `router`; node `i` ticks every `tick_periods[i]` (50 ms if
+    /// missing) on the wall clock, or on `/clock` with `sim_time`.
+    pub fn start(
+        router: Router,
+        tap: SharedTap,
+        tick_periods: &[Duration],
+        sim_time: bool,
+    ) -> std::io::Result<Threads> {
+        let nodes = router.into_nodes();
+        let mut subs: HashMap<String, Vec<Sub>> = HashMap::new();
+        for (node, n) in nodes.iter().enumerate() {
+            for (input, (port, topic)) in n.inputs.iter().enumerate() {
+                subs.entry(topic.clone()).or_default().push(Sub { node, input, sensor: port.qos == QosClass::Sensor });
+            }
+        }
+        let (txs, rxs): (Vec<_>, Vec<_>) = nodes.iter().map(|_| channel::<Work>()).unzip();
+        let inboxes = txs
+            .into_iter()
+            .map(|tx| Inbox { tx, sensor_waiting: AtomicUsize::new(0), dropped: AtomicU64::new(0) })
+            .collect();
+        let fabric = Fabric { inboxes: Arc::new(inboxes), subs: Arc::new(subs), tap };
+        let mut threads = Vec::new();
+        for (index, (placed, rx)) in nodes.into_iter().zip(rxs).enumerate() {
+            let runner = Runner {
+                tick_period: tick_periods.get(index).copied().unwrap_or(Duration::from_millis(50)),
+                sim_time,
+                fabric: fabric.clone(),
+                index,
+                placed,
+            };
+            let name = format!("node {}", runner.placed.fq_name());
+            threads.push(std::thread::Builder::new().name(name).spawn(move || runner.run(rx))?);
+        }
+        Ok(Threads { fabric, threads })
+    }
+
+    /// Delivers a message from outside the process (DDS) to the nodes that subscribe to `topic`.
+    pub fn publish(&self, topic: &str, msg: &Msg) {
+        self.fabric.emit(topic, msg, false);
+    }
+
+    /// The simulated clock, to every node.
+    pub fn clock(&self, now_ns: i64) {
+        for inbox in self.fabric.inboxes.iter() {
+            let _ = inbox.tx.send(Work::Clock(now_ns));
+        }
+    }
+
+    /// Hands node `node` its new parameters (`name` is the one that changed, for the log).
+    pub fn reconfigure(&self, node: usize, params: &Params, name: &str) {
+        if let Some(inbox) = self.fabric.inboxes.get(node) {
+            let _ = inbox.tx.send(Work::Reconfigure(Box::new(params.clone()), name.to_string()));
+        }
+    }
+
+    /// Camera-stream messages dropped so far because a node was behind.
+    pub fn dropped(&self) -> u64 {
+        self.fabric.inboxes.iter().map(|i| i.dropped.load(Ordering::Relaxed)).sum()
+    }
+
+    /// Tells every node, in the order they were added, that no more input is coming (each
+    /// flushes after what is already queued for it, and what it publishes reaches the nodes
+    /// after it), then stops the threads and gives the nodes back for their counters.
+    pub fn finish(self) -> Vec<Placed> {
+        for inbox in self.fabric.inboxes.iter() {
+            let (ack, done) = sync_channel(1);
+            if inbox.tx.send(Work::Finish(ack)).is_ok() {
+                let _ = done.recv();
+            }
+        }
+        for inbox in self.fabric.inboxes.iter() {
+            let _ = inbox.tx.send(Work::Stop);
+        }
+        let mut nodes = Vec::new();
+        for t in self.threads {
+            match t.join() {
+                Ok(p) => nodes.push(p),
+                Err(_) => log::error!("a node thread panicked"),
+            }
+        }
+        nodes
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::component::{Component, NodeError, Port};
+    use crate::params::{ParamDecl, ParamError};
+    use std::sync::Mutex;
+    use xsurf_msgs::sensor_msgs::Image;
+    use xsurf_msgs::RosMessage;
+
+    /// A source (one frame per tick on `out`), or a relay (`input` -> `out`) that takes
+    /// `work` per message; at finish it publishes a marker frame (tag 999).
+    struct Node {
+        input: Option<(&'static str, QosClass)>,
+        out: &'static str,
+        work: Duration,
+        seen: Arc<Mutex<Vec<(String, u32)>>>,
+        count: u32,
+    }
+    fn frame(tag: u32) -> Msg {
+        Msg::Image(Arc::new(Image { width: tag, ..Default::default() }))
+    }
+    fn tag(m: &Msg) -> u32 {
+        if let Msg::Image(i) = m {
+            i.width
+        } else {
+            u32::MAX
+        }
+    }
+    impl Component for Node {
+        fn node_name(&self) -> &'static str {
+            "n"
+        }
+        fn inputs(&self) -> Vec<Port> {
+            self.input.iter().map(|(t, q)| Port::new(t, Image::TYPE_NAME, *q)).collect()
+        }
+        fn outputs(&self) -> Vec<Port> {
+            vec![Port::new(self.out, Image::TYPE_NAME, QosClass::Sensor)]
+        }
+        fn declarations(&self) -> Vec<ParamDecl> {
+            Vec::new()
+        }
+        fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
+            Ok(())
+        }
+        fn handle(&mut self, _: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+            std::thread::sleep(self.work);
+            self.seen.lock().unwrap().push((self.out.to_string(), tag(msg)));
+            out.publish(0, msg.clone());
+            Ok(())
+        }
+        fn tick(&mut self, _: i64, out: &mut Outbox) {
+            if self.input.is_none() {
+                self.count += 1;
+                out.publish(0, frame(self.count));
+            }
+        }
+        fn finish(&mut self, out: &mut Outbox) {
+            out.publish(0, frame(999));
+        }
+    }
+
+    type Log = Arc<Mutex<Vec<(String, u32)>>>;
+    /// A node of a test graph: its input (topic, QoS), its output topic, its work per message.
+    type Spec = (Option<(&'static str, QosClass)>, &'static str, Duration);
+
+    fn graph(nodes: Vec<Spec>) -> (Router, Log) {
+        let seen: Log = Arc::default();
+        let mut r = Router::new();
+        for (i, (input, out, work)) in nodes.into_iter().enumerate() {
+            let n = Node { input, out, work, seen: seen.clone(), count: 0 };
+            r.add(Box::new(n), &format!("n{i}"), "/", &[]);
+        }
+        (r, seen)
+    }
+
+    #[test]
+    fn a_slow_node_holds_up_only_itself_and_finish_flushes_in_order() {
+        let reliable = QosClass::Reliable;
+        // Two cameras; the first camera's second stage is slow (a mesher building a cloud).
+        let (r, seen) = graph(vec![
+            (None, "/a", Duration::ZERO),
+            (None, "/b", Duration::ZERO),
+            (Some(("/a", reliable)), "/a2", Duration::from_millis(30)),
+            (Some(("/b", reliable)), "/b2", Duration::ZERO),
+        ]);
+        let tapped: Log = Arc::default();
+        let t = tapped.clone();
+        let tap: SharedTap = Arc::new(move |topic: &str, m: &Msg| t.lock().unwrap().push((topic.to_string(), tag(m))));
+        let ms = Duration::from_millis(5);
+        let g = Threads::start(r, tap, &[ms, ms, ms, ms], false).unwrap();
+        std::thread::sleep(Duration::from_millis(300));
+        let nodes = g.finish();
+        assert_eq!(nodes.len(), 4);
+        let seen = seen.lock().unwrap().clone();
+        let count = |out: &str| seen.iter().filter(|(o, _)| o == out).count();
+        // The fast chain kept up with its source, whatever the slow one did.
+        let b_frames = tapped.lock().unwrap().iter().filter(|(t, v)| t == "/b" && *v != 999).count();
+        assert!(b_frames >= 30, "{b_frames}");
+        assert_eq!(count("/b2"), b_frames + 1, "every /b frame and the finish marker reached /b2");
+        // The slow chain lost nothing (reliable) and got the finish marker last.
+        let a_frames = tapped.lock().unwrap().iter().filter(|(t, v)| t == "/a" && *v != 999).count();
+        let a2: Vec<u32> = seen.iter().filter(|(o, _)| o == "/a2").map(|(_, v)| *v).collect();
+        assert_eq!(a2.len(), a_frames + 1);
+        assert_eq!(a2.last(), Some(&999));
+        assert!(a2.windows(2).all(|w| w[0] < w[1]), "in order: {a2:?}");
+    }
+
+    #[test]
+    fn a_camera_stream_into_a_busy_node_drops_and_counts() {
+        let (r, seen) = graph(vec![
+            (None, "/a", Duration::ZERO),
+            (Some(("/a", QosClass::Sensor)), "/a2", Duration::from_millis(20)),
+        ]);
+        let tap: SharedTap = Arc::new(|_: &str, _: &Msg| {});
+        let g = Threads::start(r, tap, &[Duration::from_millis(1), Duration::from_millis(50)], false).unwrap();
+        std::thread::sleep(Duration::from_millis(200));
+        let dropped = g.dropped();
+        g.finish();
+        let handled = seen.lock().unwrap().iter().filter(|(o, _)| o == "/a2").count() as u64;
+        assert!(dropped > 0, "a 1 ms source into a 20 ms node must drop");
+        assert!(handled <= 200 / 20 + SENSOR_BACKLOG as u64 + 2, "{handled} handled: the backlog is bounded");
+    }
+}
