@@ -19,7 +19,7 @@ fn live(mode: &str, seconds: u32) {
     std::fs::write(
         &params,
         format!(
-            "/**:\n  ros__parameters:\n    laser_plane: [0.0, 1.0, 0.0, 0.0]\n    output_dir: {}\n/**/camera_driver:\n  ros__parameters:\n    width: 320\n    height: 240\n    fps: 15.0\n/c_arm_pose:\n  ros__parameters:\n    speed: 0.07\n    start_delay_s: 4.0\n/merger:\n  ros__parameters:\n    merge_delay_s: 1.0\n",
+            "/**:\n  ros__parameters:\n    laser_plane: [0.0, 1.0, 0.0, 0.0]\n    output_dir: {}\n/**/camera_driver:\n  ros__parameters:\n    width: 320\n    height: 240\n    fps: 15.0\n/**/triangulator:\n  ros__parameters:\n    max_extrapolation_s: 0.012\n/c_arm_pose:\n  ros__parameters:\n    speed: 0.07\n    start_delay_s: 4.0\n/merger:\n  ros__parameters:\n    merge_delay_s: 1.0\n",
             files.display()
         ),
     )
