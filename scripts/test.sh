@@ -13,7 +13,11 @@ echo "== forbidden dependencies of the algorithm crate"
 bash scripts/check-deps.sh
 echo "== cargo clippy"
 cargo clippy --workspace --all-targets --release -- -D warnings
+echo "== cargo clippy, the V4L2 source (cargo feature v4l2)"
+cargo clippy -p xsurf-nodes --features v4l2 --lib --release -- -D warnings
 echo "== cargo test"
 XSURF_REQUIRE_CHECKERS=1 cargo test --workspace --release 2>&1 | tee target/test-output.txt
+echo "== cargo test, the V4L2 source (no camera here: the conversions and a missing device)"
+cargo test -p xsurf-nodes --features v4l2 --lib --release -- v4l2 2>&1 | tee -a target/test-output.txt
 # One closing line summing every test binary.
 awk '/^test result:/ {p += $4; f += $6} END {printf "%d passed, %d failed\n", p, f}' target/test-output.txt

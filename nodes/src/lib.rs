@@ -17,6 +17,7 @@ pub mod play;
 pub mod record;
 pub mod synth;
 pub mod tf;
+pub mod v4l2;
 
 /// A command-line mistake in an `xsurf` command (the binary prints its usage and exits 2).
 #[derive(Debug, thiserror::Error)]

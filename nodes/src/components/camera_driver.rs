@@ -24,7 +24,19 @@ use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
 /// The parameters of `camera_driver`.
 pub fn declarations() -> Vec<ParamDecl> {
     vec![
-        decl("source", V::String("synthetic".into()), "", "image source: synthetic or files (v4l2 is not built yet)"),
+        decl(
+            "source",
+            V::String("synthetic".into()),
+            "",
+            "image source: synthetic, files, or v4l2 (a USB/UVC camera; needs the cargo feature v4l2)",
+        ),
+        decl("device", V::String("/dev/video0".into()), "", "v4l2 source: the video device"),
+        decl(
+            "stamp_offset_s",
+            V::Double(0.0),
+            "s",
+            "v4l2 source: the camera's delay from exposure to delivery, subtracted from the time a frame is dequeued",
+        ),
         decl(
             "files",
             V::String(String::new()),
@@ -71,7 +83,16 @@ pub fn declarations() -> Vec<ParamDecl> {
 /// Where the images come from.
 enum Source {
     Synthetic,
-    Files { list: Vec<std::path::PathBuf>, stamps: Option<Vec<i64>>, repeat: bool },
+    Files {
+        list: Vec<std::path::PathBuf>,
+        stamps: Option<Vec<i64>>,
+        repeat: bool,
+    },
+    /// A Video4Linux2 camera; stamps are the dequeue time minus `offset_ns`.
+    V4l2 {
+        device: std::path::PathBuf,
+        offset_ns: i64,
+    },
 }
 
 struct Config {
@@ -112,9 +133,23 @@ fn config(p: &Params) -> Result<Config, ParamError> {
             Source::Files { list, stamps, repeat: p.bool("loop_files")? }
         }
         "v4l2" => {
-            return Err(Params::invalid("source", "v4l2: the V4L2 source is not built yet (use synthetic or files)"))
+            if !cfg!(feature = "v4l2") {
+                return Err(Params::invalid(
+                    "source",
+                    "v4l2: this build has no V4L2 support (build xsurf-nodes with `--features v4l2`)",
+                ));
+            }
+            let device = p.string("device")?;
+            if device.is_empty() {
+                return Err(Params::invalid("device", "the v4l2 source needs a device such as /dev/video0"));
+            }
+            let offset = p.f64("stamp_offset_s")?;
+            if !(0.0..=1.0).contains(&offset) {
+                return Err(Params::invalid("stamp_offset_s", format!("{offset} is not in [0, 1]")));
+            }
+            Source::V4l2 { device: device.into(), offset_ns: (offset * 1e9).round() as i64 }
         }
-        other => return Err(Params::invalid("source", format!("{other:?}: expected synthetic or files"))),
+        other => return Err(Params::invalid("source", format!("{other:?}: expected synthetic, files or v4l2"))),
     };
     let url = p.string("camera_info_url")?;
     let camera_info = if url.is_empty() {
@@ -235,6 +270,42 @@ fn rotate_180(img: &mut xsurf_core::image::Image) {
     }
 }
 
+/// The camera model for frames of `width` x `height`: `camera_info_url`'s, else the rig's
+/// intrinsics scaled to the frames (kept in `cache`); `None` (logged) if the camera is in neither.
+fn model_for(
+    cfg: &Config,
+    camera: &str,
+    cache: &mut Option<xsurf_core::camera::CameraModel>,
+    width: u32,
+    height: u32,
+) -> Option<xsurf_core::camera::CameraModel> {
+    match (&cfg.camera_info, *cache) {
+        (Some(m), _) => Some(*m),
+        (None, Some(m)) if (m.width, m.height) == (width, height) => Some(m),
+        (None, _) => {
+            let study;
+            let rig = match &cfg.rig {
+                Some(r) => r,
+                None => {
+                    study = Rig::study(width, height);
+                    &study
+                }
+            };
+            match rig.camera(camera).map(|c| c.model()) {
+                Some(Ok(m)) => {
+                    let m = m.scaled(width, height);
+                    *cache = Some(m);
+                    Some(m)
+                }
+                _ => {
+                    log::error!("camera_driver: camera {camera:?} is not in the rig and no camera_info_url is set");
+                    None
+                }
+            }
+        }
+    }
+}
+
 /// The camera driver component.
 pub struct CameraDriverNode {
     cfg: Config,
@@ -253,6 +324,10 @@ pub struct CameraDriverNode {
     cache_bytes: usize,
     /// Files source without `camera_info_url`: the rig's intrinsics at the frames' size.
     rig_model: Option<xsurf_core::camera::CameraModel>,
+    /// V4L2 source: the open camera, when the next attempt to open it is due, failures so far.
+    capture: Option<crate::v4l2::Capture>,
+    reopen_at: i64,
+    device_errors: u64,
 }
 
 /// Decoded frames kept in memory when looping a sequence.
@@ -276,6 +351,9 @@ impl CameraDriverNode {
             cache: Vec::new(),
             cache_bytes: 0,
             rig_model: None,
+            capture: None,
+            reopen_at: i64::MIN,
+            device_errors: 0,
         })
     }
 
@@ -291,6 +369,65 @@ impl CameraDriverNode {
             self.scanner = Some((s, i));
         }
         self.scanner.as_ref().ok_or_else(|| NodeError::new("no scanner"))
+    }
+
+    /// V4L2 source: opens the camera when due (again after a failure, every second), then
+    /// publishes every frame that arrived since the last tick.
+    fn poll_camera(&mut self, device: &std::path::Path, offset_ns: i64, now_ns: i64, out: &mut Outbox) {
+        use crate::v4l2::{Capture, Captured};
+        if self.capture.is_none() {
+            if now_ns < self.reopen_at {
+                return;
+            }
+            match Capture::open(
+                device,
+                self.cfg.width,
+                self.cfg.height,
+                1e9 / self.cfg.period_ns as f64,
+                self.cfg.encoding,
+            ) {
+                Ok(c) => {
+                    log::info!("camera_driver: {} streaming {}", device.display(), String::from_utf8_lossy(&c.fourcc));
+                    self.capture = Some(c);
+                }
+                Err(e) => {
+                    self.device_errors += 1;
+                    self.reopen_at = now_ns + 1_000_000_000;
+                    if self.device_errors <= 3 || self.device_errors.is_power_of_two() {
+                        log::error!("camera_driver: {e} (attempt {}; retrying every second)", self.device_errors);
+                    }
+                    return;
+                }
+            }
+        }
+        while let Some(item) = self.capture.as_ref().and_then(|c| c.try_next()) {
+            match item {
+                Captured::Frame(at, mut img) => {
+                    if self.cfg.rotate_180 {
+                        rotate_180(&mut img);
+                    }
+                    let Some(model) = model_for(&self.cfg, &self.camera, &mut self.rig_model, img.width, img.height)
+                    else {
+                        return;
+                    };
+                    let header = convert::header(at - offset_ns, &format!("{}_optical_frame", self.camera));
+                    out.publish(1, Msg::CameraInfo(Arc::new(convert::camera_info(&model, header.clone()))));
+                    out.publish(0, Msg::Image(Arc::new(Image::from_image(header, img))));
+                    self.frames += 1;
+                }
+                Captured::Bad(e) => {
+                    self.read_errors += 1;
+                    log::warn!("camera_driver: {e}");
+                }
+                Captured::Ended(e) => {
+                    self.device_errors += 1;
+                    self.capture = None;
+                    self.reopen_at = now_ns + 1_000_000_000;
+                    log::error!("camera_driver: {e}; reopening in a second");
+                    return;
+                }
+            }
+        }
     }
 
     /// `table -> carm` at `t`, extrapolated linearly from the two newest samples.
@@ -359,11 +496,20 @@ impl Component for CameraDriverNode {
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
         }
     }
-    /// The next frame's time, so that a frame leaves on time rather than at the host's next tick.
+    /// The next frame's time, so that a frame leaves on time rather than at the host's next tick
+    /// (a V4L2 camera keeps its own time: it is polled at the tick period).
     fn next_tick_ns(&self) -> Option<i64> {
+        if matches!(self.cfg.source, Source::V4l2 { .. }) {
+            return None;
+        }
         self.next_ns
     }
     fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+        if let Source::V4l2 { device, offset_ns } = &self.cfg.source {
+            let (device, offset_ns) = (device.clone(), *offset_ns);
+            self.poll_camera(&device, offset_ns, now_ns, out);
+            return;
+        }
         let next = *self.next_ns.get_or_insert(now_ns);
         if now_ns < next {
             return;
@@ -412,33 +558,8 @@ impl Component for CameraDriverNode {
             if self.cfg.rotate_180 {
                 rotate_180(&mut img);
             }
-            let model = match (&self.cfg.camera_info, self.rig_model) {
-                (Some(m), _) => *m,
-                (None, Some(m)) if (m.width, m.height) == (img.width, img.height) => m,
-                (None, _) => {
-                    let study;
-                    let rig = match &self.cfg.rig {
-                        Some(r) => r,
-                        None => {
-                            study = Rig::study(img.width, img.height);
-                            &study
-                        }
-                    };
-                    match rig.camera(&self.camera).map(|c| c.model()) {
-                        Some(Ok(m)) => {
-                            let m = m.scaled(img.width, img.height);
-                            self.rig_model = Some(m);
-                            m
-                        }
-                        _ => {
-                            log::error!(
-                                "camera_driver: camera {:?} is not in the rig and no camera_info_url is set",
-                                self.camera
-                            );
-                            return;
-                        }
-                    }
-                }
+            let Some(model) = model_for(&self.cfg, &self.camera, &mut self.rig_model, img.width, img.height) else {
+                return;
             };
             if (model.width, model.height) != (img.width, img.height) {
                 self.read_errors += 1;
@@ -491,7 +612,12 @@ impl Component for CameraDriverNode {
         self.frames += 1;
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("frames", self.frames), ("frames_not_rendered_in_time", self.skipped), ("read_errors", self.read_errors)]
+        vec![
+            ("frames", self.frames),
+            ("frames_not_rendered_in_time", self.skipped),
+            ("read_errors", self.read_errors),
+            ("device_errors", self.device_errors),
+        ]
     }
 }
 
@@ -502,6 +628,33 @@ mod tests {
     use std::cell::RefCell;
     use std::rc::Rc;
     use xsurf_runtime::router::Router;
+
+    #[test]
+    fn v4l2_source_is_refused_without_the_feature_and_survives_a_missing_camera_with_it() {
+        let mut o = std::collections::BTreeMap::new();
+        o.insert("source".to_string(), V::String("v4l2".into()));
+        o.insert("device".to_string(), V::String("/dev/video-xsurf-none".into()));
+        let p = Params::resolve(&declarations("camera_driver").unwrap(), &o).unwrap();
+        match (cfg!(feature = "v4l2"), CameraDriverNode::new(&p)) {
+            (false, Err(e)) => {
+                assert!(e.to_string().contains("source") && e.to_string().contains("--features v4l2"), "{e}");
+            }
+            (true, Ok(mut node)) => {
+                let mut out = Outbox::default();
+                for k in 0..3 {
+                    node.tick(k * 600_000_000, &mut out);
+                }
+                assert!(out.items.is_empty());
+                let errors = node.counters().into_iter().find(|c| c.0 == "device_errors").unwrap().1;
+                assert_eq!(errors, 2, "opened at 0 and again a second later, not at every tick");
+            }
+            (built, r) => panic!("feature v4l2 built: {built}, node: {:?}", r.err()),
+        }
+        o.insert("stamp_offset_s".to_string(), V::Double(-0.1));
+        let p = Params::resolve(&declarations("camera_driver").unwrap(), &o).unwrap();
+        let e = CameraDriverNode::new(&p).err().unwrap().to_string();
+        assert!(e.contains(if cfg!(feature = "v4l2") { "stamp_offset_s" } else { "source" }), "{e}");
+    }
 
     #[test]
     fn files_source_publishes_the_sequence_with_its_calibration_stamps_and_rotation() {
