@@ -39,6 +39,43 @@ impl Placed {
     pub fn fq_name(&self) -> String {
         fq_name(&self.namespace, &self.name)
     }
+    /// Hands the component a message on input `input`: counted, timed, and a refusal logged
+    /// (the first few; all are counted and the last is kept for reports). Returns what it
+    /// published.
+    pub fn handle(&mut self, input: usize, msg: &Msg) -> Outbox {
+        let mut out = Outbox::default();
+        self.handled += 1;
+        let t0 = std::time::Instant::now();
+        let r = self.component.handle(input, msg, &mut out);
+        self.busy_ns += t0.elapsed().as_nanos() as u64;
+        if let Err(e) = r {
+            self.errors += 1;
+            let topic = self.inputs.get(input).map_or("?", |(_, t)| t.as_str()).to_string();
+            if self.errors <= 5 {
+                log::warn!("{}: message on {topic} refused: {e}", self.fq_name());
+            } else if self.errors == 6 {
+                log::warn!("{}: more messages refused; counting them quietly", self.fq_name());
+            }
+            self.last_error = Some(format!("{topic}: {e}"));
+        }
+        out
+    }
+    /// Ticks the component (timed); returns what it published.
+    pub fn tick(&mut self, now_ns: i64) -> Outbox {
+        let mut out = Outbox::default();
+        let t0 = std::time::Instant::now();
+        self.component.tick(now_ns, &mut out);
+        self.busy_ns += t0.elapsed().as_nanos() as u64;
+        out
+    }
+    /// Tells the component no more input is coming (timed); returns what it published.
+    pub fn finish(&mut self) -> Outbox {
+        let mut out = Outbox::default();
+        let t0 = std::time::Instant::now();
+        self.component.finish(&mut out);
+        self.busy_ns += t0.elapsed().as_nanos() as u64;
+        out
+    }
 }
 
 /// True for a topic that ROS lets many nodes publish: `/tf`, `/tf_static` and the scan events
@@ -123,22 +160,7 @@ impl Router {
         while let Some((topic, msg)) = self.queue.pop_front() {
             let Some(subs) = self.subs.get(&topic).cloned() else { continue };
             for (node, input) in subs {
-                let mut out = Outbox::default();
-                let n = &mut self.nodes[node];
-                n.handled += 1;
-                let t0 = std::time::Instant::now();
-                let r = n.component.handle(input, &msg, &mut out);
-                n.busy_ns += t0.elapsed().as_nanos() as u64;
-                if let Err(e) = r {
-                    n.errors += 1;
-                    // The first few are logged; all are counted, and the last is kept for reports.
-                    if n.errors <= 5 {
-                        log::warn!("{}: message on {topic} refused: {e}", n.fq_name());
-                    } else if n.errors == 6 {
-                        log::warn!("{}: more messages refused; counting them quietly", n.fq_name());
-                    }
-                    n.last_error = Some(format!("{topic}: {e}"));
-                }
+                let out = self.nodes[node].handle(input, &msg);
                 self.deliver(node, out);
             }
         }
@@ -195,10 +217,7 @@ impl Router {
     /// Ticks every node with the graph's clock, then handles what they published.
     pub fn tick(&mut self, now_ns: i64) {
         for i in 0..self.nodes.len() {
-            let mut out = Outbox::default();
-            let t0 = std::time::Instant::now();
-            self.nodes[i].component.tick(now_ns, &mut out);
-            self.nodes[i].busy_ns += t0.elapsed().as_nanos() as u64;
+            let out = self.nodes[i].tick(now_ns);
             self.deliver(i, out);
         }
         self.drain();
@@ -206,10 +225,7 @@ impl Router {
     /// Tells every node, in the order they were added, that no more input is coming.
     pub fn finish(&mut self) {
         for i in 0..self.nodes.len() {
-            let mut out = Outbox::default();
-            let t0 = std::time::Instant::now();
-            self.nodes[i].component.finish(&mut out);
-            self.nodes[i].busy_ns += t0.elapsed().as_nanos() as u64;
+            let out = self.nodes[i].finish();
             self.deliver(i, out);
             self.drain();
         }

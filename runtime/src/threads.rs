@@ -108,26 +108,6 @@ impl Runner {
         }
     }
 
-    fn handle(&mut self, input: usize, msg: &Msg) {
-        let mut out = Outbox::default();
-        let n = &mut self.placed;
-        n.handled += 1;
-        let t0 = Instant::now();
-        let r = n.component.handle(input, msg, &mut out);
-        n.busy_ns += t0.elapsed().as_nanos() as u64;
-        if let Err(e) = r {
-            n.errors += 1;
-            let topic = n.inputs.get(input).map_or("?", |(_, t)| t.as_str()).to_string();
-            if n.errors <= 5 {
-                log::warn!("{}: message on {topic} refused: {e}", n.fq_name());
-            } else if n.errors == 6 {
-                log::warn!("{}: more messages refused; counting them quietly", n.fq_name());
-            }
-            n.last_error = Some(format!("{topic}: {e}"));
-        }
-        self.publish(out);
-    }
-
     fn run(mut self, rx: Receiver<Work>) -> Placed {
         let wall =
             || std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as i64);
@@ -145,7 +125,8 @@ impl Runner {
                     if sensor {
                         self.fabric.inboxes[self.index].sensor_waiting.fetch_sub(1, Ordering::AcqRel);
                     }
-                    self.handle(input, &msg);
+                    let out = self.placed.handle(input, &msg);
+                    self.publish(out);
                 }
                 Ok(Work::Clock(t)) => clock = Some(t),
                 Ok(Work::Reconfigure(params, name)) => match self.placed.component.reconfigure(&params) {
@@ -154,10 +135,7 @@ impl Runner {
                 },
                 Ok(Work::Finish(ack)) => {
                     finished = true;
-                    let mut out = Outbox::default();
-                    let t0 = Instant::now();
-                    self.placed.component.finish(&mut out);
-                    self.placed.busy_ns += t0.elapsed().as_nanos() as u64;
+                    let out = self.placed.finish();
                     self.publish(out);
                     let _ = ack.send(());
                 }
@@ -172,10 +150,7 @@ impl Runner {
             let due = wake.is_some_and(|w| now.is_some_and(|n| n >= w));
             if let Some(now) = now.filter(|_| due || last_tick.elapsed() >= self.tick_period) {
                 last_tick = Instant::now();
-                let mut out = Outbox::default();
-                let t0 = Instant::now();
-                self.placed.component.tick(now, &mut out);
-                self.placed.busy_ns += t0.elapsed().as_nanos() as u64;
+                let out = self.placed.tick(now);
                 self.publish(out);
             }
         }
