@@ -49,6 +49,9 @@ pub enum HostError {
     /// DDS refused something.
     #[error("DDS: {0}")]
     Dds(String),
+    /// A node's thread ended before shutdown (it panicked); the others were shut down.
+    #[error("{0} stopped unexpectedly")]
+    NodeDied(String),
 }
 
 /// The DDS domain and network settings from the ROS 2 environment variables.
@@ -728,7 +731,13 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
         env.domain_id,
         if env.localhost_only { "localhost only" } else { "all interfaces" }
     );
+    let mut died: Option<String> = None;
     while !stop.load(Ordering::SeqCst) {
+        if let Some(name) = graph.dead_node() {
+            log::error!("{name} stopped unexpectedly; shutting the process down");
+            died = Some(name);
+            break;
+        }
         match rx.recv_timeout(Duration::from_millis(100)) {
             Ok(Event::Message(k, m)) => {
                 if let Some((topic, _, _)) = externals.get(k) {
@@ -778,6 +787,9 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     drop(nodes);
     drop(dds_nodes);
     drop(ctx);
+    if let Some(name) = died {
+        return Err(HostError::NodeDied(name));
+    }
     Ok(errors)
 }
 

@@ -220,6 +220,14 @@ impl Threads {
         }
     }
 
+    /// The name of a node whose thread has ended before [`Threads::finish`] (it panicked), if any.
+    pub fn dead_node(&self) -> Option<String> {
+        self.threads
+            .iter()
+            .find(|t| t.is_finished())
+            .map(|t| t.thread().name().unwrap_or("a node").trim_start_matches("node ").to_string())
+    }
+
     /// Camera-stream messages dropped so far because a node was behind.
     pub fn dropped(&self) -> u64 {
         self.fabric.inboxes.iter().map(|i| i.dropped.load(Ordering::Relaxed)).sum()
@@ -354,6 +362,43 @@ mod tests {
         assert_eq!(a2.len(), a_frames + 1);
         assert_eq!(a2.last(), Some(&999));
         assert!(a2.windows(2).all(|w| w[0] < w[1]), "in order: {a2:?}");
+    }
+
+    /// Panics on its first message.
+    struct Fragile;
+    impl Component for Fragile {
+        fn node_name(&self) -> &'static str {
+            "fragile"
+        }
+        fn inputs(&self) -> Vec<Port> {
+            vec![Port::new("/a", Image::TYPE_NAME, QosClass::Reliable)]
+        }
+        fn outputs(&self) -> Vec<Port> {
+            Vec::new()
+        }
+        fn declarations(&self) -> Vec<ParamDecl> {
+            Vec::new()
+        }
+        fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
+            Ok(())
+        }
+        fn handle(&mut self, _: usize, _: &Msg, _: &mut Outbox) -> Result<(), NodeError> {
+            panic!("a bug")
+        }
+    }
+
+    #[test]
+    fn a_node_that_dies_is_named_and_the_rest_still_shut_down() {
+        let (mut r, _) = graph(vec![(None, "/a", Duration::ZERO)]);
+        r.add(Box::new(Fragile), "fragile", "/x", &[]);
+        let tap: SharedTap = Arc::new(|_: &str, _: &Msg| {});
+        let g = Threads::start(r, tap, &[Duration::from_millis(5), Duration::from_millis(50)], false).unwrap();
+        let t0 = Instant::now();
+        while g.dead_node().is_none() && t0.elapsed() < Duration::from_secs(5) {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert_eq!(g.dead_node().as_deref(), Some("/x/fragile"));
+        assert_eq!(g.finish().len(), 1, "the live node comes back, the dead one is reported");
     }
 
     #[test]
