@@ -743,6 +743,36 @@ mod tests {
         turned.reverse();
         assert_eq!(images[0].data, turned);
         assert_eq!(images[3].data, turned, "the loop starts again");
+        // A late host: the frames keep their slots on the grid; the slots it missed are counted.
+        let p = Params::resolve(
+            &declarations("camera_driver").unwrap(),
+            &[
+                ("source".to_string(), V::String("files".into())),
+                ("files".to_string(), V::String(dir.join("frame_%03d.bmp").to_string_lossy().into())),
+                ("camera_info_url".to_string(), V::String(format!("file://{}", calib.display()))),
+                ("fps".to_string(), V::Double(100.0)),
+                ("loop_files".to_string(), V::Bool(true)),
+            ]
+            .into_iter()
+            .collect(),
+        )
+        .unwrap();
+        let mut node = CameraDriverNode::new(&p).unwrap();
+        let mut out = Outbox::default();
+        let t0 = 5_000_000_000i64;
+        for late_ms in [0, 10, 45, 50] {
+            node.tick(t0 + late_ms * 1_000_000, &mut out);
+        }
+        let stamps: Vec<i64> = out
+            .items
+            .iter()
+            .filter_map(|(_, m)| match m {
+                Msg::Image(i) => Some(i.header.stamp.nanos() - t0),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(stamps, [0, 10_000_000, 40_000_000, 50_000_000]);
+        assert_eq!(node.counters()[1], ("frames_not_rendered_in_time", 2));
         // Bad configuration is refused, naming the parameter.
         let bad = |k: &str, v: V| {
             let mut o = std::collections::BTreeMap::new();
