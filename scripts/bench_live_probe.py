@@ -180,7 +180,16 @@ def main(bin_dir, launch, params, mode, seconds, fps, out):
             "publish_ms_max": round(max(published[c]) if published[c] else -1, 2),
         }
     text = (out / f"launch-{mode}.log").read_text(errors="replace")
-    result["dropped_while_busy"] = [l.split("] ", 1)[-1] for l in text.splitlines() if "dropped while the node was busy" in l]
+    result["dropped_while_busy"] = [l.split("] ", 1)[-1] for l in text.splitlines() if "dropped while a node was busy" in l]
+    # Each node's time in its own code, as the host logs it at shutdown (the whole run, start-up
+    # included): per-node CPU also when the nodes share one process.
+    busy = {}
+    for l in text.splitlines():
+        if "busy " in l and "% of a core" in l:
+            msg = l.split("]: ", 1)[-1]
+            name = msg.split(":", 1)[0]
+            busy[name] = float(msg.split("busy ", 1)[1].split(" %", 1)[0])
+    result["node_busy_percent"] = busy
     print(json.dumps(result))
 
 

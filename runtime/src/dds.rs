@@ -723,6 +723,7 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     }
     let node_count = router.nodes().len();
     let ticks: Vec<Duration> = configs.iter().map(|c| c.0.tick_period).collect();
+    let started = std::time::Instant::now();
     let graph = crate::threads::Threads::start(router, tap, &ticks, sim_time)
         .map_err(|e| HostError::Dds(format!("thread: {e}")))?;
     log::info!(
@@ -765,8 +766,17 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     // The last outputs leave through the publisher threads before the count.
     publishers.join();
     let mut errors = pub_errors.load(Ordering::Relaxed);
+    let ran = started.elapsed().as_secs_f64().max(1e-9);
     for n in &nodes {
         errors += n.errors;
+        // Time in the component's own code (not DDS, not serialization): per-node CPU when
+        // several share a process.
+        log::info!(
+            "{}: handled {} message(s), busy {:.1} % of a core over {ran:.1} s",
+            n.fq_name(),
+            n.handled,
+            100.0 * n.busy_ns as f64 * 1e-9 / ran
+        );
         for (k, v) in n.component.counters() {
             log::info!("{}: {k} = {v}", n.fq_name());
         }
