@@ -188,6 +188,12 @@ pub trait Component: Send {
     }
     /// No more input is coming (end of a bag, or shutdown): flush what is pending.
     fn finish(&mut self, _out: &mut Outbox) {}
+    /// True for a node whose work is bulk (meshing, merging, overlays) rather than on the path
+    /// from a frame to its profile: the live host runs it, and the publishers of its outputs,
+    /// at a lower CPU priority, so that on a loaded machine the cameras' chain goes first.
+    fn bulk(&self) -> bool {
+        false
+    }
     /// Counters for reports and logs, as `(name, value)`.
     fn counters(&self) -> Vec<(&'static str, u64)> {
         Vec::new()

@@ -680,7 +680,14 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
         )),
         None => None,
     };
-    let publishers = PublishThreads::start(pubs, &sensor_topics, pub_errors.clone(), latency_log)?;
+    // The outputs of bulk nodes (clouds, meshes) are serialized at their nodes' lower priority.
+    let bulk_topics: Vec<String> = router
+        .nodes()
+        .iter()
+        .filter(|n| n.component.bulk())
+        .flat_map(|n| n.outputs.iter().map(|(_, t)| t.clone()))
+        .collect();
+    let publishers = PublishThreads::start(pubs, &sensor_topics, &bulk_topics, pub_errors.clone(), latency_log)?;
     let tap: crate::threads::SharedTap = {
         let pub_errors = pub_errors.clone();
         let senders = publishers.senders.clone();
@@ -824,6 +831,7 @@ impl PublishThreads {
     fn start(
         pubs: Publishers,
         sensor_topics: &[String],
+        bulk_topics: &[String],
         errors: Arc<AtomicU64>,
         latency_log: Option<Arc<std::fs::File>>,
     ) -> Result<Self, HostError> {
@@ -834,10 +842,14 @@ impl PublishThreads {
             let errors = errors.clone();
             let name = topic.clone();
             let latency_log = latency_log.clone();
+            let bulk = bulk_topics.contains(&topic);
             threads.push(
                 std::thread::Builder::new()
                     .name(format!("pub {topic}"))
                     .spawn(move || {
+                        if bulk {
+                            crate::threads::lower_this_thread();
+                        }
                         while let Ok(m) = rx.recv() {
                             if let Err(e) = pb.publish(&m) {
                                 let n = errors.fetch_add(1, Ordering::Relaxed) + 1;

@@ -27,6 +27,24 @@ use std::time::{Duration, Instant};
 /// Camera-stream messages a node may have waiting before the next one is dropped.
 pub const SENSOR_BACKLOG: usize = 4;
 
+/// The nice value of the threads of bulk nodes ([`crate::component::Component::bulk`]) and of
+/// their publishers.
+pub const BULK_NICE: i32 = 10;
+
+/// Lowers the calling thread's CPU priority to [`BULK_NICE`] (Linux keeps a nice value per
+/// thread), never raising it. Lowering needs no privilege; a failure is logged and the thread
+/// goes on as it was.
+pub fn lower_this_thread() {
+    let tid = rustix::thread::gettid();
+    let now = rustix::process::getpriority_process(Some(tid)).unwrap_or(0);
+    if now >= BULK_NICE {
+        return;
+    }
+    if let Err(e) = rustix::process::setpriority_process(Some(tid), BULK_NICE) {
+        log::debug!("thread {tid:?}: nice {BULK_NICE} not set: {e}");
+    }
+}
+
 /// Forwards every message a node publishes to outside observers (DDS, a bag).
 pub type SharedTap = Arc<dyn Fn(&str, &Msg) + Send + Sync>;
 
@@ -109,6 +127,9 @@ impl Runner {
     }
 
     fn run(mut self, rx: Receiver<Work>) -> Placed {
+        if self.placed.component.bulk() {
+            lower_this_thread();
+        }
         let wall =
             || std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as i64);
         let mut clock: Option<i64> = None;
@@ -399,6 +420,25 @@ mod tests {
         }
         assert_eq!(g.dead_node().as_deref(), Some("/x/fragile"));
         assert_eq!(g.finish().len(), 1, "the live node comes back, the dead one is reported");
+    }
+
+    #[test]
+    fn a_bulk_thread_runs_at_the_lower_priority_and_others_do_not() {
+        // Field 19 of /proc/thread-self/stat is the thread's nice value (after the `(comm)`).
+        let nice = || {
+            let stat = std::fs::read_to_string("/proc/thread-self/stat").unwrap();
+            let after = &stat[stat.rfind(')').unwrap() + 2..];
+            after.split(' ').nth(16).unwrap().parse::<i32>().unwrap()
+        };
+        let base = std::thread::spawn(nice).join().unwrap();
+        let lowered = std::thread::spawn(move || {
+            lower_this_thread();
+            nice()
+        })
+        .join()
+        .unwrap();
+        assert_eq!(lowered, BULK_NICE.max(base));
+        assert_eq!(std::thread::spawn(nice).join().unwrap(), base, "only the calling thread is lowered");
     }
 
     #[test]

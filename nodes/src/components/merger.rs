@@ -661,6 +661,10 @@ impl Component for MergerNode {
             self.merge(out);
         }
     }
+    /// Bulk work: the live host runs it behind the frame path.
+    fn bulk(&self) -> bool {
+        true
+    }
     fn counters(&self) -> Vec<(&'static str, u64)> {
         vec![
             ("merges", self.merges),

@@ -371,6 +371,10 @@ impl Component for MesherNode {
     fn finish(&mut self, out: &mut Outbox) {
         self.close(false, out);
     }
+    /// Bulk work: the live host runs it behind the frame path.
+    fn bulk(&self) -> bool {
+        true
+    }
     fn counters(&self) -> Vec<(&'static str, u64)> {
         vec![
             ("scans", self.scans),

@@ -581,6 +581,10 @@ impl Component for XrayAlignerNode {
         }
         self.try_place(i64::MAX, true, out);
     }
+    /// Bulk work: the live host runs it behind the frame path.
+    fn bulk(&self) -> bool {
+        true
+    }
     fn counters(&self) -> Vec<(&'static str, u64)> {
         vec![
             ("loaded", self.loaded),
