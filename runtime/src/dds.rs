@@ -553,10 +553,11 @@ pub fn run(env: &DdsEnv, cfg: HostConfig, component: Box<dyn Component>) -> Resu
     run_graph(env, vec![(cfg, component)])
 }
 
-/// Runs several components in one process until SIGINT/SIGTERM: connected in memory by the
-/// [`Router`](crate::router::Router), each with its own ROS 2 node (name, parameters, services),
-/// every output also published on DDS for outside observers, and DDS subscriptions only for the
-/// topics no component of the process publishes. Returns the number of refused messages.
+/// Runs several components in one process until SIGINT/SIGTERM: each on a thread of its own,
+/// connected in memory ([`Threads`](crate::threads::Threads)), each with its own ROS 2 node
+/// (name, parameters, services), every output also published on DDS for outside observers, and
+/// DDS subscriptions for the topics no component of the process publishes (and for the shared
+/// ones: tf, scan events). Returns the number of refused messages.
 pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> Result<u64, HostError> {
     let ctx = env.context()?;
     let stop = Arc::new(AtomicBool::new(false));
