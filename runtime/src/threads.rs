@@ -4,7 +4,7 @@
 //! A node's slow work (a growing cloud, a mesh at END, the merge) then holds up only that node:
 //! the cameras keep their frame times and the other camera's chain runs on the other core. Each
 //! node thread ticks itself: at its tick period, or earlier when the component asks
-//! ([`Component::next_tick_ns`]), so a camera's frame leaves on time.
+//! ([`Component::next_tick_ns`](crate::component::Component::next_tick_ns)), so a camera's frame leaves on time.
 //!
 //! Delivery: one FIFO inbox per node, so every topic keeps its order. Camera streams (sensor QoS)
 //! are best effort here as over DDS: a node that already has [`SENSOR_BACKLOG`] of them waiting
