@@ -2,6 +2,12 @@
 
 use serde::{Deserialize, Serialize};
 
+/// Luma of a colour (ITU-R BT.601 weights: 0.299 R + 0.587 G + 0.114 B).
+#[inline]
+pub fn luma(r: f32, g: f32, b: f32) -> f32 {
+    0.299 * r + 0.587 * g + 0.114 * b
+}
+
 /// Pixel encodings we handle (`sensor_msgs/image_encodings` names).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Encoding {

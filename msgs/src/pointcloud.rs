@@ -62,64 +62,19 @@ pub fn build(
     mut point: impl FnMut(usize, usize) -> ([f32; 3], f32, u32),
 ) -> PointCloud2 {
     let n = height as usize * width as usize;
-    // Sized once and written in place: no capacity check per field.
-    let mut data = vec![0u8; n * POINT_STEP as usize];
+    let mut data = Vec::with_capacity(n * POINT_STEP as usize);
     let mut dense = true;
-    let mut slots = data.chunks_exact_mut(POINT_STEP as usize);
     for r in 0..height as usize {
-        for (c, slot) in (0..width as usize).zip(slots.by_ref()) {
+        for c in 0..width as usize {
             let (p, i, rgb) = point(r, c);
             dense &= p.iter().all(|v| v.is_finite());
-            let words = [p[0].to_bits(), p[1].to_bits(), p[2].to_bits(), i.to_bits(), rgb];
-            for (dst, w) in slot.chunks_exact_mut(4).zip(words) {
-                dst.copy_from_slice(&w.to_le_bytes());
+            for v in p {
+                data.extend_from_slice(&v.to_le_bytes());
             }
+            data.extend_from_slice(&i.to_le_bytes());
+            data.extend_from_slice(&f32::from_bits(rgb).to_le_bytes());
         }
     }
-    cloud(header, height, width, data, dense)
-}
-
-/// Builds the same cloud as [`build`] from column-major arrays (point `(r, c)` at index
-/// `c * height + r`, as a scan's grid stores its frames), transposing in blocks of rows so that
-/// both the reads and the writes stay in cache. `None` if an array is shorter than
-/// `height * width`.
-pub fn build_from_columns(
-    header: Header,
-    height: u32,
-    width: u32,
-    xyz: &[[f32; 3]],
-    intensity: &[f32],
-    rgb: &[u32],
-) -> Option<PointCloud2> {
-    const BLOCK: usize = 16;
-    let (h, w) = (height as usize, width as usize);
-    let n = h * w;
-    if xyz.len() < n || intensity.len() < n || rgb.len() < n {
-        return None;
-    }
-    let step = POINT_STEP as usize;
-    let mut data = vec![0u8; n * step];
-    let mut dense = true;
-    for r0 in (0..h).step_by(BLOCK) {
-        let r1 = (r0 + BLOCK).min(h);
-        for c in 0..w {
-            let src = c * h;
-            for r in r0..r1 {
-                let (p, i, k) = (xyz[src + r], intensity[src + r], rgb[src + r]);
-                dense &= p.iter().all(|v| v.is_finite());
-                let words = [p[0].to_bits(), p[1].to_bits(), p[2].to_bits(), i.to_bits(), k];
-                let at = (r * w + c) * step;
-                for (dst, v) in data[at..at + step].chunks_exact_mut(4).zip(words) {
-                    dst.copy_from_slice(&v.to_le_bytes());
-                }
-            }
-        }
-    }
-    Some(cloud(header, height, width, data, dense))
-}
-
-/// The `x y z intensity rgb` cloud around `data`.
-fn cloud(header: Header, height: u32, width: u32, data: Vec<u8>, dense: bool) -> PointCloud2 {
     let field = |name: &str, offset| PointField { name: name.into(), offset, datatype: PointField::FLOAT32, count: 1 };
     PointCloud2 {
         header,
@@ -205,22 +160,6 @@ mod tests {
         assert_eq!(p[4].xyz, [1.0, 1.0, 0.5]);
         assert_eq!(p[4].rgb, Some(0x00ff8000));
         assert!(p[5].xyz[0].is_nan());
-    }
-
-    #[test]
-    fn columns_give_the_same_cloud_as_points() {
-        for (h, w) in [(1, 1), (17, 3), (33, 40), (5, 0)] {
-            let n = (h * w) as usize;
-            let at = |r: usize, c: usize| c * h as usize + r;
-            let xyz: Vec<[f32; 3]> =
-                (0..n).map(|i| if i % 7 == 3 { [f32::NAN; 3] } else { [i as f32, -(i as f32), 0.25] }).collect();
-            let intensity: Vec<f32> = (0..n).map(|i| i as f32 * 0.5).collect();
-            let rgb: Vec<u32> = (0..n as u32).map(|i| i * 0x010203).collect();
-            let a = build_from_columns(Header::default(), h, w, &xyz, &intensity, &rgb).unwrap();
-            let b = build(Header::default(), h, w, |r, c| (xyz[at(r, c)], intensity[at(r, c)], rgb[at(r, c)]));
-            assert_eq!(a, b, "{h} x {w}");
-        }
-        assert!(build_from_columns(Header::default(), 2, 2, &[[0.0; 3]; 3], &[0.0; 4], &[0; 4]).is_none());
     }
 
     #[test]

@@ -186,16 +186,10 @@ pub fn fmt_stamp(ns: i64) -> String {
 
 /// The organized grid so far: height = samples per frame, width = frames.
 pub fn grid_cloud(g: &Grid, header: Header) -> PointCloud2 {
-    let (ns, nf) = (g.samples() as u32, g.frames() as u32);
-    pointcloud::build_from_columns(header.clone(), ns, nf, g.points(), g.intensity(), g.rgb()).unwrap_or_else(|| {
-        // A grid keeps its arrays at samples x frames; should that ever not hold, the missing
-        // points are holes rather than a panic.
-        let ns = ns as usize;
-        pointcloud::build(header, ns as u32, nf, |r, c| {
-            let i = c * ns + r;
-            let p = g.points().get(i).copied().unwrap_or([f32::NAN; 3]);
-            (p, g.intensity().get(i).copied().unwrap_or(0.0), g.rgb().get(i).copied().unwrap_or(0))
-        })
+    let ns = g.samples();
+    pointcloud::build(header, ns as u32, g.frames() as u32, |r, c| {
+        let i = c * ns + r;
+        (g.points()[i], g.intensity()[i], g.rgb()[i])
     })
 }
 

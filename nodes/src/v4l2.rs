@@ -5,7 +5,7 @@
 //! feature `v4l2` (the `linuxvideo` crate: pure Rust, memory-mapped streaming I/O). Without it,
 //! [`Capture::open`] says how to get it.
 
-use xsurf_core::image::{Encoding, Image};
+use xsurf_core::image::{luma, Encoding, Image};
 
 /// The camera pixel formats the source reads, as V4L2 fourcc codes.
 pub const FORMATS: [[u8; 4]; 4] = [*b"GREY", *b"YUYV", *b"RGB3", *b"BGR3"];
@@ -87,8 +87,7 @@ pub fn convert(f: &RawFrame<'_>, encoding: Encoding) -> Result<Image, String> {
             (_, 1) => {
                 let (ri, bi) = if f.fourcc == *b"RGB3" { (0, 2) } else { (2, 0) };
                 data.extend(row.chunks_exact(3).map(|p| {
-                    let y = 0.299 * f32::from(p[ri]) + 0.587 * f32::from(p[1]) + 0.114 * f32::from(p[bi]);
-                    y.round().clamp(0.0, 255.0) as u8
+                    luma(f32::from(p[ri]), f32::from(p[1]), f32::from(p[bi])).round().clamp(0.0, 255.0) as u8
                 }));
             }
             _ => data.extend(row.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2]])),
@@ -183,9 +182,7 @@ impl Capture {
             .name(format!("v4l2 {dev_name}"))
             .spawn(move || loop {
                 let r = stream.dequeue(|buf| {
-                    let now = std::time::SystemTime::now()
-                        .duration_since(std::time::UNIX_EPOCH)
-                        .map_or(0, |d| d.as_nanos() as i64);
+                    let now = xsurf_runtime::wall_clock_ns();
                     if buf.is_error() {
                         return Ok(Captured::Bad(format!("{name}: the driver flagged a corrupt frame")));
                     }

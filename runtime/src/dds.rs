@@ -885,8 +885,7 @@ impl PublishThreads {
 /// a measurement, not the node's output.
 fn log_latency(mut file: &std::fs::File, topic: &str, stamp_ns: i64) {
     use std::io::Write;
-    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
-    let _ = file.write_all(format!("{topic} {stamp_ns} {now}\n").as_bytes());
+    let _ = file.write_all(format!("{topic} {stamp_ns} {}\n", crate::wall_clock_ns()).as_bytes());
 }
 
 impl Publishers {

@@ -13,3 +13,8 @@ pub mod params;
 pub mod rosargs;
 pub mod router;
 pub mod threads;
+
+/// The wall clock: ns since the Unix epoch (0 for a clock set before it).
+pub fn wall_clock_ns() -> i64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as i64)
+}

@@ -210,10 +210,6 @@ impl Router {
         }
         v
     }
-    /// The earliest tick some node asked for ([`Component::next_tick_ns`]).
-    pub fn next_tick_ns(&self) -> Option<i64> {
-        self.nodes.iter().filter_map(|n| n.component.next_tick_ns()).min()
-    }
     /// Ticks every node with the graph's clock, then handles what they published.
     pub fn tick(&mut self, now_ns: i64) {
         for i in 0..self.nodes.len() {

@@ -130,15 +130,13 @@ impl Runner {
         if self.placed.component.bulk() {
             lower_this_thread();
         }
-        let wall =
-            || std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as i64);
         let mut clock: Option<i64> = None;
         let mut last_tick = Instant::now();
         let mut finished = false;
         loop {
             let wake = if self.sim_time || finished { None } else { self.placed.component.next_tick_ns() };
             let timeout = match wake {
-                Some(w) => self.tick_period.min(Duration::from_nanos((w - wall()).max(0) as u64)),
+                Some(w) => self.tick_period.min(Duration::from_nanos((w - crate::wall_clock_ns()).max(0) as u64)),
                 None => self.tick_period,
             };
             match rx.recv_timeout(timeout) {
@@ -167,7 +165,7 @@ impl Runner {
                 continue;
             }
             // With simulated time, time does not start before the first /clock message.
-            let now = if self.sim_time { clock } else { Some(wall()) };
+            let now = if self.sim_time { clock } else { Some(crate::wall_clock_ns()) };
             let due = wake.is_some_and(|w| now.is_some_and(|n| n >= w));
             if let Some(now) = now.filter(|_| due || last_tick.elapsed() >= self.tick_period) {
                 last_tick = Instant::now();

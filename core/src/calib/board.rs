@@ -154,7 +154,7 @@ impl Grey {
             for y in 0..h as u32 {
                 for x in 0..w as u32 {
                     let [r, g, b] = view.rgb_at(x, y);
-                    data.push(0.299 * f32::from(r) + 0.587 * f32::from(g) + 0.114 * f32::from(b));
+                    data.push(crate::image::luma(f32::from(r), f32::from(g), f32::from(b)));
                 }
             }
         }

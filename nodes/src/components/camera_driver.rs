@@ -371,10 +371,26 @@ impl CameraDriverNode {
         self.scanner.as_ref().ok_or_else(|| NodeError::new("no scanner"))
     }
 
+    /// Publishes a frame and its camera_info, both stamped `stamp` in the camera's optical frame.
+    fn publish_frame(
+        &mut self,
+        stamp: i64,
+        model: &xsurf_core::camera::CameraModel,
+        img: xsurf_core::image::Image,
+        out: &mut Outbox,
+    ) {
+        let header = convert::header(stamp, &format!("{}_optical_frame", self.camera));
+        out.publish(1, Msg::CameraInfo(Arc::new(convert::camera_info(model, header.clone()))));
+        out.publish(0, Msg::Image(Arc::new(Image::from_image(header, img))));
+        self.frames += 1;
+    }
+
     /// V4L2 source: opens the camera when due (again after a failure, every second), then
     /// publishes every frame that arrived since the last tick.
-    fn poll_camera(&mut self, device: &std::path::Path, offset_ns: i64, now_ns: i64, out: &mut Outbox) {
+    fn poll_camera(&mut self, now_ns: i64, out: &mut Outbox) {
         use crate::v4l2::{Capture, Captured};
+        let Source::V4l2 { device, offset_ns } = &self.cfg.source else { return };
+        let offset_ns = *offset_ns;
         if self.capture.is_none() {
             if now_ns < self.reopen_at {
                 return;
@@ -410,10 +426,7 @@ impl CameraDriverNode {
                     else {
                         return;
                     };
-                    let header = convert::header(at - offset_ns, &format!("{}_optical_frame", self.camera));
-                    out.publish(1, Msg::CameraInfo(Arc::new(convert::camera_info(&model, header.clone()))));
-                    out.publish(0, Msg::Image(Arc::new(Image::from_image(header, img))));
-                    self.frames += 1;
+                    self.publish_frame(at - offset_ns, &model, img, out);
                 }
                 Captured::Bad(e) => {
                     self.read_errors += 1;
@@ -505,9 +518,8 @@ impl Component for CameraDriverNode {
         self.next_ns
     }
     fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
-        if let Source::V4l2 { device, offset_ns } = &self.cfg.source {
-            let (device, offset_ns) = (device.clone(), *offset_ns);
-            self.poll_camera(&device, offset_ns, now_ns, out);
+        if matches!(self.cfg.source, Source::V4l2 { .. }) {
+            self.poll_camera(now_ns, out);
             return;
         }
         let next = *self.next_ns.get_or_insert(now_ns);
@@ -573,12 +585,10 @@ impl Component for CameraDriverNode {
                 );
                 return;
             }
-            let header = convert::header(stamp, &format!("{}_optical_frame", self.camera));
-            out.publish(1, Msg::CameraInfo(Arc::new(convert::camera_info(&model, header.clone()))));
-            out.publish(0, Msg::Image(Arc::new(Image::from_image(header, img))));
-            self.frames += 1;
-            if self.next_file == list.len() && !*repeat {
-                log::info!("camera_driver: all {} frames published", list.len());
+            let all_done = (self.next_file == list.len() && !*repeat).then_some(list.len());
+            self.publish_frame(stamp, &model, img, out);
+            if let Some(n) = all_done {
+                log::info!("camera_driver: all {n} frames published");
             }
             return;
         }
@@ -606,10 +616,7 @@ impl Component for CameraDriverNode {
                 return;
             }
         };
-        let header = convert::header(now_ns, &format!("{}_optical_frame", self.camera));
-        out.publish(1, Msg::CameraInfo(Arc::new(convert::camera_info(&model, header.clone()))));
-        out.publish(0, Msg::Image(Arc::new(Image::from_image(header, img))));
-        self.frames += 1;
+        self.publish_frame(now_ns, &model, img, out);
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
         vec![
