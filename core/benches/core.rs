@@ -6,7 +6,7 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
-use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine, Method};
+use xsurf_core::edge::{argmax_u8, EdgeConfig, EdgeDetector, LaserLine, Method};
 use xsurf_core::fuse::{one_surface, FuseConfig};
 use xsurf_core::image::{Encoding, Image};
 use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
@@ -28,12 +28,7 @@ fn byte_sum(data: &[u8]) -> u64 {
 /// What every detector does first on each row: the row's maximum and its first position (the
 /// strongest line). The floor under any detector's per-row cost on short rows.
 fn row_argmax(data: &[u8], w: usize) -> usize {
-    data.chunks_exact(w)
-        .map(|row| {
-            let max = row.iter().fold(0u8, |a, &b| a.max(b));
-            memchr::memchr(max, row).unwrap_or(0)
-        })
-        .sum()
+    data.chunks_exact(w).map(|row| argmax_u8(row).unwrap_or(0)).sum()
 }
 
 fn edge_detection(c: &mut Criterion) {

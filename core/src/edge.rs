@@ -13,6 +13,7 @@
 use crate::geom::solve3;
 use crate::image::{Encoding, ImageError, ImageView};
 use serde::{Deserialize, Serialize};
+use wide::u8x16;
 
 /// How the line centre is located within a row.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -285,6 +286,14 @@ trait Sample: Copy + PartialOrd {
     fn moments(p: &[Self], start: usize, end: usize) -> (f32, f32);
     /// Sum of a run and its first moment about the run's start: (sum v, sum i v).
     fn weighted(s: &[Self]) -> (f64, f64);
+    /// Index of the first maximum of `p` (`None` if empty).
+    fn argmax(p: &[Self]) -> Option<usize>;
+    /// The run of samples above `cut` on either side of `m`, at most `reach` samples each way
+    /// and inside `p`: `(first, last)`. `p[m]` itself is not compared.
+    #[inline(always)]
+    fn run(p: &[Self], m: usize, reach: usize, cut: Self::Cut) -> (usize, usize) {
+        (walk_left(p, m, m.saturating_sub(reach), cut), walk_right(p, m, m + reach, cut))
+    }
 }
 
 /// Lane masks for a flank loaded as 16 bytes: `FIRST[16 - k..][..16]` keeps the first `k` lanes,
@@ -367,6 +376,74 @@ impl Sample for u8 {
         }
         (f64::from(a), f64::from(b))
     }
+    /// The maximum 16 lanes at a time, then the first 32 bytes that hold it (compare, move mask).
+    #[inline]
+    fn argmax(p: &[u8]) -> Option<usize> {
+        let mut blocks = p.chunks_exact(16);
+        let lanes = (&mut blocks).filter_map(block).fold(u8x16::ZERO, |m, b| m.max(u8x16::new(b)));
+        let max = lanes.to_array().into_iter().chain(blocks.remainder().iter().copied()).fold(0, u8::max);
+        let key = u8x16::splat(max);
+        let hits = |b: &[u8]| block(b).map_or(0, |b| u8x16::new(b).simd_eq(key).to_bitmask());
+        let mut pairs = p.chunks_exact(32);
+        for (k, b) in (&mut pairs).enumerate() {
+            let (lo, hi) = b.split_at(16);
+            let found = hits(lo) | hits(hi) << 16;
+            if found != 0 {
+                return Some(32 * k + found.trailing_zeros() as usize);
+            }
+        }
+        let tail = pairs.remainder();
+        let start = p.len() - tail.len();
+        let found = tail.get(..16).map_or(0, hits);
+        if found != 0 {
+            return Some(start + found.trailing_zeros() as usize);
+        }
+        let rest = tail.len() / 16 * 16;
+        tail[rest..].iter().position(|&v| v == max).map(|i| start + rest + i)
+    }
+    /// Inside the row, one 32-byte window around `m`: a lane mask of the samples above the
+    /// cut, whose ones next to `m` on each side are the run.
+    #[inline(always)]
+    fn run(p: &[u8], m: usize, reach: usize, cut: i32) -> (usize, usize) {
+        let window = m.checked_sub(16).and_then(|a| p.get(a..m + 16)).filter(|_| reach < 16);
+        let (Some(w), Some(floor)) = (window, above_floor(cut)) else {
+            return (walk_left(p, m, m.saturating_sub(reach), cut), walk_right(p, m, m + reach, cut));
+        };
+        let (Some(a), Some(b)) = (block(&w[..16]), block(&w[16..])) else {
+            return (m, m);
+        };
+        // Bit i: p[m - 16 + i] is above the cut; bit 16 is p[m].
+        let mask = above16(a, floor) | above16(b, floor) << 16;
+        let left = ((mask as u16).leading_ones() as usize).min(reach);
+        let right = ((!(mask >> 17)).trailing_zeros() as usize).min(reach);
+        (m - left, m + right)
+    }
+}
+
+/// Index of the first maximum of a row of bytes (`None` if empty): where every sub-pixel method
+/// starts, the strongest line's peak. Vectorised (16 lanes: SSE2, NEON or scalar).
+pub fn argmax_u8(row: &[u8]) -> Option<usize> {
+    u8::argmax(row)
+}
+
+/// A 16-byte block of a slice of exactly 16.
+#[inline(always)]
+fn block(b: &[u8]) -> Option<[u8; 16]> {
+    b.try_into().ok()
+}
+
+/// The lane value that a byte above the integer cut reaches: `cut + 1`, or `None` when the cut
+/// is below every byte (`cut < 0`) or above every byte (`cut >= 255`).
+#[inline(always)]
+fn above_floor(cut: i32) -> Option<u8x16> {
+    u8::try_from(cut + 1).ok().filter(|&f| f > 0).map(u8x16::splat)
+}
+
+/// Bit `i` is set iff `w[i] >= floor` (bits 16 and up are clear).
+#[inline(always)]
+fn above16(w: [u8; 16], floor: u8x16) -> u32 {
+    let v = u8x16::new(w);
+    v.max(floor).simd_eq(v).to_bitmask()
 }
 impl Sample for f32 {
     type Cut = f32;
@@ -400,18 +477,28 @@ impl Sample for f32 {
         }
         (a, b)
     }
+    fn argmax(p: &[f32]) -> Option<usize> {
+        let mut best: Option<(usize, f32)> = None;
+        for (i, &v) in p.iter().enumerate() {
+            if best.is_none_or(|(_, b)| v > b) {
+                best = Some((i, v));
+            }
+        }
+        best.map(|(i, _)| i)
+    }
 }
 
-/// The lowest `l` in `min..=from` with every sample of `p[l..from]` above `cut`.
+/// The first of [`Sample::run`], one sample at a time: the lowest `l` in `min..=from` with
+/// every sample of `p[l..from]` above `cut`.
 #[inline(always)]
-fn extend_left<S: Sample>(p: &[S], from: usize, min: usize, cut: S::Cut) -> usize {
+fn walk_left<S: Sample>(p: &[S], from: usize, min: usize, cut: S::Cut) -> usize {
     from - p[min..from].iter().rev().take_while(|v| v.above(cut)).count()
 }
 
-/// The highest `r` in `from..=max` (and inside `p`) with every sample of `p[from + 1..=r]`
-/// above `cut`.
+/// The last of [`Sample::run`], one sample at a time: the highest `r` in `from..=max` (and
+/// inside `p`) with every sample of `p[from + 1..=r]` above `cut`.
 #[inline(always)]
-fn extend_right<S: Sample>(p: &[S], from: usize, max: usize, cut: S::Cut) -> usize {
+fn walk_right<S: Sample>(p: &[S], from: usize, max: usize, cut: S::Cut) -> usize {
     let end = (max + 1).min(p.len());
     from + p[from + 1..end].iter().take_while(|v| v.above(cut)).count()
 }
@@ -423,22 +510,6 @@ struct Peak {
     strength: f32,
     width: f32,
     saturated: bool,
-}
-
-/// Index of the first maximum of a byte row: a vectorised max, then a SIMD byte search.
-fn argmax_u8(p: &[u8]) -> Option<usize> {
-    let max = p.iter().fold(0u8, |a, &b| a.max(b));
-    memchr::memchr(max, p)
-}
-
-fn argmax_f32(p: &[f32]) -> Option<usize> {
-    let mut best: Option<(usize, f32)> = None;
-    for (i, &v) in p.iter().enumerate() {
-        if best.is_none_or(|(_, b)| v > b) {
-            best = Some((i, v));
-        }
-    }
-    best.map(|(i, _)| i)
 }
 
 /// Background level and noise around a peak at `m`, from flanks outside `±gap`: the pooled mean,
@@ -500,8 +571,8 @@ fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturat
     let gap0 = max_hw.min(6);
     let (bg0, noise0) = background(p, m, gap0, cfg.flank_px as usize);
     let half0 = S::cut(bg0 + 0.5 * (peak - bg0));
-    let lo = extend_left(p, m, m.saturating_sub(max_hw), half0);
-    let hi = extend_right(p, m, m + max_hw, half0);
+    // One sample further than a line may reach, so that a line too wide shows as such.
+    let (lo, hi) = S::run(p, m, max_hw + 1, half0);
     let gap = (2 * (m - lo).max(hi - m) + 2).min(max_hw);
     // A narrower line keeps the first flanks (they are clear of it, only a little further out).
     let gap = gap.max(gap0);
@@ -512,9 +583,8 @@ fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturat
     }
     // Full width at half maximum.
     let half = bg + 0.5 * strength;
-    let (l, r) = if gap == gap0 { (lo, hi) } else { (m, m) };
-    let l = extend_left(p, l, m.saturating_sub(max_hw + 1), S::cut(half));
-    let r = extend_right(p, r, m + max_hw + 1, S::cut(half));
+    // With the first flanks, `half` is the first pass's level and its run is already known.
+    let (l, r) = if gap == gap0 { (lo, hi) } else { S::run(p, m, max_hw + 1, S::cut(half)) };
     let left = if l > 0 { crossing(p, l - 1, l, half) } else { l as f32 - 0.5 };
     let right = if r + 1 < n { crossing(p, r + 1, r, half) } else { r as f32 + 0.5 };
     let width = right - left;
@@ -542,8 +612,7 @@ fn find_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32, saturat
 /// `sample - threshold` (every sample of the run is above it, the peak included).
 fn center_of_gravity<S: Sample>(p: &[S], m: usize, threshold: f32, max_hw: usize) -> Option<f32> {
     let cut = S::cut(threshold);
-    let lo = extend_left(p, m, m.saturating_sub(max_hw), cut);
-    let hi = extend_right(p, m, m + max_hw, cut);
+    let (lo, hi) = S::run(p, m, max_hw, cut);
     let (sv, sxv) = S::weighted(&p[lo..=hi]);
     let k = (hi - lo + 1) as f64;
     let t = f64::from(threshold);
@@ -661,11 +730,11 @@ impl EdgeDetector {
             stats.searched += 1;
             let peak = if vertical && enc == Encoding::Mono8 {
                 let row = &image.row(s)[inner.start as usize..inner.end as usize];
-                locate(row, argmax_u8(row), cfg, scale, saturation)
+                locate(row, u8::argmax(row), cfg, scale, saturation)
             } else {
                 fill_profile(image, s, inner.clone(), vertical, cfg.channel, &mut self.profile);
                 let p = &self.profile[..];
-                locate(p, argmax_f32(p), cfg, scale, saturation)
+                locate(p, f32::argmax(p), cfg, scale, saturation)
             };
             let Some(peak) = peak else { continue };
             let pos = inner.start as f32 + peak.pos;
@@ -798,13 +867,38 @@ mod tests {
             let float: Vec<f32> = row.iter().map(|&v| f32::from(v)).collect();
             let method = [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic][method];
             let cfg = EdgeConfig { method, ..Default::default() };
-            let a = locate(&row, argmax_u8(&row), &cfg, 1.0, 255.0);
-            let b = locate(&float, argmax_f32(&float), &cfg, 1.0, 255.0);
+            let a = locate(&row, u8::argmax(&row), &cfg, 1.0, 255.0);
+            let b = locate(&float, f32::argmax(&float), &cfg, 1.0, 255.0);
             proptest::prop_assert_eq!(a.is_some(), b.is_some(), "{:?} {:?} {:?}", row, a, b);
             if let (Some(a), Some(b)) = (a, b) {
                 proptest::prop_assert!((a.pos - b.pos).abs() < 1e-3, "{:?} {:?}", a, b);
                 proptest::prop_assert!((a.width - b.width).abs() < 1e-4);
                 proptest::prop_assert_eq!(a.strength, b.strength);
+            }
+        }
+    }
+
+    proptest::proptest! {
+        /// The vectorised byte primitives against one-sample-at-a-time walks and search.
+        #[test]
+        fn byte_runs_and_argmax_match_scalar(
+            row in proptest::collection::vec(0u8..=255, 0..80),
+            m in 0usize..80,
+            reach in 0usize..20,
+            cut in -3i32..260,
+            small in proptest::collection::vec(0u8..4, 0..80),
+        ) {
+            // Random bytes against any cut, and runs of few levels against cuts among them.
+            for (p, cut) in [(&row[..], cut), (&small[..], cut.rem_euclid(5) - 1)] {
+                let expected = p.iter().enumerate().fold(None, |b: Option<(usize, u8)>, (i, &v)| match b {
+                    Some((_, bv)) if bv >= v => b,
+                    _ => Some((i, v)),
+                });
+                proptest::prop_assert_eq!(argmax_u8(p), expected.map(|(i, _)| i));
+                if m < p.len() {
+                    let scalar = (walk_left(p, m, m.saturating_sub(reach), cut), walk_right(p, m, m + reach, cut));
+                    proptest::prop_assert_eq!(u8::run(p, m, reach, cut), scalar, "{:?} m {} reach {} cut {}", p, m, reach, cut);
+                }
             }
         }
     }
