@@ -155,7 +155,11 @@ impl Grid {
 }
 
 fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+    dist2(a, b).sqrt()
+}
+/// Squared distance.
+fn dist2(a: [f32; 3], b: [f32; 3]) -> f32 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
 }
 fn mid(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [(a[0] + b[0]) * 0.5, (a[1] + b[1]) * 0.5, (a[2] + b[2]) * 0.5]
@@ -283,22 +287,21 @@ impl Mesh {
 
     /// Area-weighted vertex normals.
     pub fn compute_normals(&mut self) {
-        let mut acc = vec![[0.0f64; 3]; self.positions.len()];
+        let mut acc = vec![[0.0f32; 3]; self.positions.len()];
         for t in &self.triangles {
             let [a, b, c] = t.map(|i| self.positions[i as usize]);
             let n = cross(sub(b, a), sub(c, a));
             for &i in t {
-                for k in 0..3 {
-                    acc[i as usize][k] += f64::from(n[k]);
-                }
+                let s = &mut acc[i as usize];
+                *s = [s[0] + n[0], s[1] + n[1], s[2] + n[2]];
             }
         }
         self.normals = acc
-            .iter()
+            .into_iter()
             .map(|n| {
-                let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                let l = dot(n, n).sqrt();
                 if l > 0.0 {
-                    [(n[0] / l) as f32, (n[1] / l) as f32, (n[2] / l) as f32]
+                    [n[0] / l, n[1] / l, n[2] / l]
                 } else {
                     [0.0, 0.0, 1.0]
                 }
@@ -399,16 +402,17 @@ pub(crate) fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
 
 /// True if the triangle `[pa, pb, pc]` has every edge within `max_edge` and its smallest angle
 /// at least `asin(sin_min)` (the mesher's test, also the zipper's).
+#[inline]
 pub(crate) fn triangle_ok([pa, pb, pc]: [[f32; 3]; 3], max_edge: f32, sin_min: f32) -> bool {
-    let (ab, bc, ca) = (dist(pa, pb), dist(pb, pc), dist(pc, pa));
-    if ab > max_edge || bc > max_edge || ca > max_edge {
+    // All in squares (no square roots): lengths, and sin = 2*area / (product of the two edges
+    // beside the smallest angle, which is opposite the shortest edge).
+    let (ab, bc, ca) = (dist2(pa, pb), dist2(pb, pc), dist2(pc, pa));
+    let max2 = max_edge * max_edge;
+    if ab > max2 || bc > max2 || ca > max2 || max_edge < 0.0 {
         return false;
     }
-    // Smallest angle is opposite the shortest edge: sin = 2*area / (product of the other two).
-    let area2 = {
-        let n = cross(sub(pb, pa), sub(pc, pa));
-        dot(n, n).sqrt()
-    };
+    let n = cross(sub(pb, pa), sub(pc, pa));
+    let area2_sq = dot(n, n);
     let (e1, e2) = if ab <= bc && ab <= ca {
         (bc, ca)
     } else if bc <= ca {
@@ -416,7 +420,8 @@ pub(crate) fn triangle_ok([pa, pb, pc]: [[f32; 3]; 3], max_edge: f32, sin_min: f
     } else {
         (ab, bc)
     };
-    e1 * e2 > 0.0 && area2 / (e1 * e2) >= sin_min
+    let den = e1 * e2;
+    den > 0.0 && area2_sq >= sin_min * sin_min.abs() * den
 }
 
 /// Colour of a vertex without camera colour: grey from the laser strength.
@@ -432,9 +437,11 @@ fn grid_triangles(grid: &Grid, cfg: &MeshConfig, mut emit: impl FnMut([usize; 3]
     let valid = |i: usize| pts[i][0].is_finite();
     let sin_min = cfg.min_angle_deg.to_radians().sin();
     let limit = |i: usize| cfg.max_edge_m + cfg.max_edge_per_m * grid.range()[i].max(0.0);
+    let fixed = cfg.max_edge_per_m == 0.0;
     // Accept a triangle of grid indices if its edges and angles pass.
     let ok = |a: usize, b: usize, c: usize| -> bool {
-        triangle_ok([pts[a], pts[b], pts[c]], limit(a).min(limit(b)).min(limit(c)), sin_min)
+        let max_edge = if fixed { cfg.max_edge_m } else { limit(a).min(limit(b)).min(limit(c)) };
+        triangle_ok([pts[a], pts[b], pts[c]], max_edge, sin_min)
     };
     for f in 0..nf.saturating_sub(1) {
         for s in 0..ns.saturating_sub(1) {
@@ -451,7 +458,7 @@ fn grid_triangles(grid: &Grid, cfg: &MeshConfig, mut emit: impl FnMut([usize; 3]
             match v {
                 [true, true, true, true] => {
                     // Split along the shorter diagonal.
-                    if dist(pts[i00], pts[i11]) <= dist(pts[i10], pts[i01]) {
+                    if dist2(pts[i00], pts[i11]) <= dist2(pts[i10], pts[i01]) {
                         emit(i00, i10, i11);
                         emit(i00, i11, i01);
                     } else {
@@ -481,21 +488,32 @@ pub fn meshed_samples(grid: &Grid, cfg: &MeshConfig) -> Vec<bool> {
 /// Triangulates an organized grid into a mesh. Its vertices are the grid's finite points that
 /// some triangle uses (isolated points are left out of the surface; the grid keeps them).
 pub fn mesh_grid(grid: &Grid, cfg: &MeshConfig) -> Mesh {
-    let mut index = vec![u32::MAX; grid.points().len()];
-    let mut mesh = Mesh::default();
-    for (i, p) in grid.points().iter().enumerate() {
-        if p[0].is_finite() {
-            index[i] = mesh.positions.len() as u32;
-            mesh.positions.push(*p);
-            mesh.colors.push(if grid.has_rgb() {
-                let c = grid.rgb()[i];
-                [(c >> 16) as u8, (c >> 8) as u8, c as u8]
-            } else {
-                grey_from_intensity(grid.intensity()[i])
-            });
+    const UNUSED: u32 = u32::MAX;
+    const USED: u32 = u32::MAX - 1;
+    let mut index = vec![UNUSED; grid.points().len()];
+    let mut corners: Vec<[u32; 3]> = Vec::with_capacity(2 * grid.points().len());
+    grid_triangles(grid, cfg, |t| {
+        corners.push(t.map(|i| i as u32));
+        for i in t {
+            index[i] = USED;
         }
+    });
+    // The used samples become vertices in grid order.
+    let mut mesh = Mesh::default();
+    let used = index.iter().filter(|&&v| v == USED).count();
+    mesh.positions.reserve_exact(used);
+    mesh.colors.reserve_exact(used);
+    for (i, v) in index.iter_mut().enumerate().filter(|(_, v)| **v == USED) {
+        *v = mesh.positions.len() as u32;
+        mesh.positions.push(grid.points()[i]);
+        mesh.colors.push(if grid.has_rgb() {
+            let c = grid.rgb()[i];
+            [(c >> 16) as u8, (c >> 8) as u8, c as u8]
+        } else {
+            grey_from_intensity(grid.intensity()[i])
+        });
     }
-    grid_triangles(grid, cfg, |[a, b, c]| mesh.triangles.push([index[a], index[b], index[c]]));
+    mesh.triangles = corners.into_iter().map(|t| t.map(|i| index[i as usize])).collect();
     // Orient the surface to face up (the scanner looks down on the table).
     let up: f32 = mesh
         .triangles
@@ -510,7 +528,6 @@ pub fn mesh_grid(grid: &Grid, cfg: &MeshConfig) -> Mesh {
             t.swap(1, 2);
         }
     }
-    mesh.remove_unreferenced();
     mesh.smooth(cfg.smooth_iterations, cfg.smooth_lambda);
     mesh.compute_normals();
     mesh
@@ -533,6 +550,34 @@ mod tests {
             g.push(f as i64, &p).unwrap();
         }
         g
+    }
+
+    proptest::proptest! {
+        /// The test in squares decides as the test in lengths and angles does (away from the
+        /// limits, where rounding may go either way).
+        #[test]
+        fn triangle_test_in_squares_matches_lengths_and_angles(
+            p in proptest::array::uniform9(-0.02f32..0.02),
+            max_edge in 0.0f32..0.03,
+            min_angle_deg in 0.0f32..40.0,
+        ) {
+            let [a, b, c] = [[p[0], p[1], p[2]], [p[3], p[4], p[5]], [p[6], p[7], p[8]]];
+            let sin_min = min_angle_deg.to_radians().sin();
+            let (ab, bc, ca) = (dist(a, b), dist(b, c), dist(c, a));
+            let area2 = {
+                let n = cross(sub(b, a), sub(c, a));
+                dot(n, n).sqrt()
+            };
+            // The sine of the smallest angle, opposite the shortest edge.
+            let mut e = [ab, bc, ca];
+            e.sort_by(f32::total_cmp);
+            let sin = area2 / (e[1] * e[2]);
+            let longest = e[2];
+            let clear = (longest - max_edge).abs() > 1e-4 * max_edge && (sin - sin_min).abs() > 1e-4 && e[0] > 1e-6;
+            if clear {
+                proptest::prop_assert_eq!(triangle_ok([a, b, c], max_edge, sin_min), longest <= max_edge && sin >= sin_min);
+            }
+        }
     }
 
     #[test]
