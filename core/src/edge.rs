@@ -406,11 +406,9 @@ impl Sample for u8 {
     #[inline(always)]
     fn run(p: &[u8], m: usize, reach: usize, cut: i32) -> (usize, usize) {
         let window = m.checked_sub(16).and_then(|a| p.get(a..m + 16)).filter(|_| reach < 16);
-        let (Some(w), Some(floor)) = (window, above_floor(cut)) else {
+        let halves = window.and_then(|w| Some((block(&w[..16])?, block(&w[16..])?)));
+        let (Some((a, b)), Some(floor)) = (halves, above_floor(cut)) else {
             return (walk_left(p, m, m.saturating_sub(reach), cut), walk_right(p, m, m + reach, cut));
-        };
-        let (Some(a), Some(b)) = (block(&w[..16]), block(&w[16..])) else {
-            return (m, m);
         };
         // Bit i: p[m - 16 + i] is above the cut; bit 16 is p[m].
         let mask = above16(a, floor) | above16(b, floor) << 16;
