@@ -392,14 +392,9 @@ impl Sample for u8 {
                 return Some(32 * k + found.trailing_zeros() as usize);
             }
         }
+        // Under 32 bytes left.
         let tail = pairs.remainder();
-        let start = p.len() - tail.len();
-        let found = tail.get(..16).map_or(0, hits);
-        if found != 0 {
-            return Some(start + found.trailing_zeros() as usize);
-        }
-        let rest = tail.len() / 16 * 16;
-        tail[rest..].iter().position(|&v| v == max).map(|i| start + rest + i)
+        tail.iter().position(|&v| v == max).map(|i| p.len() - tail.len() + i)
     }
     /// Inside the row, one 32-byte window around `m`: a lane mask of the samples above the
     /// cut, whose ones next to `m` on each side are the run.
