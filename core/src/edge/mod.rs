@@ -1,0 +1,1268 @@
+//! Sub-pixel laser-line detection, one sample per image row (or column).
+//!
+//! Every method first finds the strongest peak of the row profile (the brightest sample, which
+//! also picks the strongest of several lines), estimates the local background and noise from
+//! two flanks beside it, and accepts the peak only if it stands above the background by more than
+//! `max(min_strength, noise_factor * noise)`: the study's "floating threshold". The centre is then
+//! refined by the chosen method. A saturated peak (a plateau at the encoding's maximum) is
+//! always located by its centre of gravity, because a fit to a clipped top is biased.
+//!
+//! [`Method::Gradient`] is the reference study's method (a five-pixel gradient above a fixed
+//! threshold, integer pixels), kept so that the improvement can be measured.
+
+mod fit;
+mod lanes;
+mod track;
+
+use crate::image::{Encoding, ImageError, ImageView};
+use fit::{center_of_gravity, gaussian_fit, integrated_gaussian, Fit};
+pub use lanes::argmax_u8;
+use lanes::Sample;
+use serde::{Deserialize, Serialize};
+
+/// How the line centre is located within a row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// The study's method: first five-pixel rise above `gradient_threshold`, integer pixels.
+    Gradient,
+    /// Centre of gravity of the background-subtracted samples above a fraction of the peak.
+    #[default]
+    CenterOfGravity,
+    /// Weighted least-squares parabola through the logarithm of the peak (a Gaussian fit).
+    Gaussian,
+    /// Parabola through the peak sample and its two neighbours.
+    Parabolic,
+}
+
+impl Method {
+    /// Parses the parameter value (`gradient`, `center_of_gravity`/`cog`, `gaussian`, `parabolic`).
+    pub fn parse(s: &str) -> Option<Method> {
+        match s {
+            "gradient" => Some(Method::Gradient),
+            "center_of_gravity" | "cog" | "centre_of_gravity" => Some(Method::CenterOfGravity),
+            "gaussian" => Some(Method::Gaussian),
+            "parabolic" => Some(Method::Parabolic),
+            _ => None,
+        }
+    }
+    /// The parameter value naming this method.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Gradient => "gradient",
+            Method::CenterOfGravity => "center_of_gravity",
+            Method::Gaussian => "gaussian",
+            Method::Parabolic => "parabolic",
+        }
+    }
+}
+
+/// Which way the line runs in the image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Orientation {
+    /// The line runs top to bottom: one sample per image row (`LaserLine.ORIENTATION_VERTICAL`).
+    #[default]
+    Vertical,
+    /// The line runs left to right: one sample per image column.
+    Horizontal,
+}
+
+impl Orientation {
+    /// Parses `vertical` / `horizontal`.
+    pub fn parse(s: &str) -> Option<Orientation> {
+        match s {
+            "vertical" => Some(Orientation::Vertical),
+            "horizontal" => Some(Orientation::Horizontal),
+            _ => None,
+        }
+    }
+}
+
+/// Which signal of a colour image carries the laser.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Channel {
+    /// The red channel.
+    #[default]
+    Red,
+    /// Luma (0.299 R + 0.587 G + 0.114 B).
+    Luma,
+    /// Red minus the mean of green and blue, clamped at 0: suppresses white surfaces.
+    RedMinusOthers,
+}
+
+impl Channel {
+    /// Parses `red`, `luma`, `red_minus_others`.
+    pub fn parse(s: &str) -> Option<Channel> {
+        match s {
+            "red" => Some(Channel::Red),
+            "luma" => Some(Channel::Luma),
+            "red_minus_others" => Some(Channel::RedMinusOthers),
+            _ => None,
+        }
+    }
+}
+
+/// A rectangle of the image to search (pixels); zero width or height means "to the edge".
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Roi {
+    /// First column.
+    pub x_offset: u32,
+    /// First row.
+    pub y_offset: u32,
+    /// Columns (0: to the right edge).
+    pub width: u32,
+    /// Rows (0: to the bottom edge).
+    pub height: u32,
+}
+
+/// Configuration of the detector. Every field is an `edge_detector` parameter of the same name.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct EdgeConfig {
+    /// Centre-finding method.
+    pub method: Method,
+    /// Line orientation in the image.
+    pub line_orientation: Orientation,
+    /// Signal used for colour images.
+    pub channel: Channel,
+    /// Region searched.
+    pub roi: Roi,
+    /// Smallest accepted peak height above the local background, grey levels (8-bit scale;
+    /// scaled by 257 for mono16).
+    pub min_strength: f32,
+    /// The peak must also exceed this many times the local noise (standard deviation).
+    pub noise_factor: f32,
+    /// Samples above `background + peak_fraction * strength` take part in the centre estimate.
+    pub peak_fraction: f32,
+    /// Largest half-width searched around the peak, pixels.
+    pub max_half_width_px: u32,
+    /// Length of each background flank, pixels.
+    pub flank_px: u32,
+    /// Peaks wider than this (full width at half maximum, pixels) are rejected as smeared
+    /// (grazing incidence or a depth edge).
+    pub max_width_px: f32,
+    /// For `gradient`: the five-pixel rise that marks the line, grey levels.
+    pub gradient_threshold: f32,
+    /// Colour is sampled this far beside the line centre (the study's t +/- d), pixels.
+    pub color_offset_px: f32,
+    /// A line stands above the background on both sides: the lower side's rise must be at
+    /// least this fraction of the higher side's. A step (bright on one side) is not a line.
+    pub min_side_ratio: f32,
+    /// Lines narrower than this (FWHM, pixels) are located by a pixel-integrated Gaussian fit,
+    /// whatever the method: every thresholded or three-point estimate locks to pixel centres
+    /// there.
+    pub narrow_width_px: f32,
+    /// Peaks tried per row, strongest first, until one passes every test.
+    pub max_candidates: u32,
+    /// Samples of a line run along at least this many consecutive rows (columns); shorter runs
+    /// (noise, texture, a highlight) are dropped, and a frame without laser light gives none.
+    pub min_run: u32,
+    /// Largest step of the line centre between neighbouring rows (columns) of one run, pixels.
+    pub max_jump_px: f32,
+}
+
+impl Default for EdgeConfig {
+    fn default() -> Self {
+        Self {
+            method: Method::CenterOfGravity,
+            line_orientation: Orientation::Vertical,
+            channel: Channel::Red,
+            roi: Roi::default(),
+            min_strength: 8.0,
+            noise_factor: 6.0,
+            peak_fraction: 0.15,
+            max_half_width_px: 12,
+            flank_px: 10,
+            max_width_px: 14.0,
+            gradient_threshold: 40.0,
+            color_offset_px: 8.0,
+            min_side_ratio: 0.3,
+            narrow_width_px: 3.2,
+            max_candidates: 3,
+            min_run: 5,
+            max_jump_px: 3.0,
+        }
+    }
+}
+
+/// Why a configuration or an image was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EdgeError {
+    /// The image itself is malformed.
+    #[error(transparent)]
+    Image(#[from] ImageError),
+    /// The region of interest lies outside the image.
+    #[error("roi {roi:?} lies outside the {width}x{height} image")]
+    RoiOutside {
+        /// The region.
+        roi: Roi,
+        /// Image width.
+        width: u32,
+        /// Image height.
+        height: u32,
+    },
+    /// A configuration value is out of range.
+    #[error("invalid edge_detector parameter {name}: {reason}")]
+    InvalidConfig {
+        /// Parameter name.
+        name: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl EdgeConfig {
+    /// Checks every value; the same check refuses a bad run-time parameter set.
+    pub fn validate(&self) -> Result<(), EdgeError> {
+        let bad = |name, reason: &str| Err(EdgeError::InvalidConfig { name, reason: reason.to_string() });
+        if !(self.min_strength.is_finite() && self.min_strength >= 0.0) {
+            return bad("min_strength", "must be a finite value >= 0");
+        }
+        if !(self.noise_factor.is_finite() && self.noise_factor >= 0.0) {
+            return bad("noise_factor", "must be a finite value >= 0");
+        }
+        if !(self.peak_fraction >= 0.0 && self.peak_fraction < 1.0) {
+            return bad("peak_fraction", "must be in [0, 1)");
+        }
+        if self.max_half_width_px == 0 || self.max_half_width_px > 256 {
+            return bad("max_half_width_px", "must be in 1..=256");
+        }
+        if self.flank_px == 0 || self.flank_px > 256 {
+            return bad("flank_px", "must be in 1..=256");
+        }
+        if !(self.max_width_px > 0.0) {
+            return bad("max_width_px", "must be > 0");
+        }
+        if !(self.gradient_threshold > 0.0) {
+            return bad("gradient_threshold", "must be > 0");
+        }
+        if !(self.color_offset_px.is_finite() && self.color_offset_px >= 0.0) {
+            return bad("color_offset_px", "must be a finite value >= 0");
+        }
+        if !(0.0..=1.0).contains(&self.min_side_ratio) {
+            return bad("min_side_ratio", "must be in [0, 1]");
+        }
+        if !(self.narrow_width_px.is_finite() && self.narrow_width_px >= 0.0) {
+            return bad("narrow_width_px", "must be a finite value >= 0");
+        }
+        if self.max_candidates == 0 || self.max_candidates > 16 {
+            return bad("max_candidates", "must be in 1..=16");
+        }
+        if self.min_run == 0 || self.min_run > 1000 {
+            return bad("min_run", "must be in 1..=1000");
+        }
+        if !(self.max_jump_px.is_finite() && self.max_jump_px > 0.0) {
+            return bad("max_jump_px", "must be a finite value > 0");
+        }
+        Ok(())
+    }
+}
+
+/// The laser line found in one image: the algorithm side of `xsurf_msgs/LaserLine`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LaserLine {
+    /// Orientation the samples follow.
+    pub orientation: Orientation,
+    /// Source image width.
+    pub image_width: u32,
+    /// Source image height.
+    pub image_height: u32,
+    /// Sub-pixel column of the line centre per sample, NaN where none.
+    pub u: Vec<f32>,
+    /// Sub-pixel row of the line centre per sample, NaN where none.
+    pub v: Vec<f32>,
+    /// Peak height above the local background (grey levels), 0 where none.
+    pub strength: Vec<f32>,
+    /// Full width at half maximum (pixels), 0 where none.
+    pub width: Vec<f32>,
+    /// Surface colour beside the line, 3 bytes a sample; empty for grey images.
+    pub rgb: Vec<u8>,
+}
+
+impl LaserLine {
+    /// Number of samples (rows for vertical lines, columns for horizontal).
+    pub fn len(&self) -> usize {
+        self.u.len()
+    }
+    /// True when there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.u.is_empty()
+    }
+    /// Number of samples where a line was found.
+    pub fn found(&self) -> usize {
+        self.u.iter().filter(|u| u.is_finite()).count()
+    }
+    /// Clears sample `i` (no line there).
+    fn clear(&mut self, i: usize) {
+        self.u[i] = f32::NAN;
+        self.v[i] = f32::NAN;
+        self.strength[i] = 0.0;
+        self.width[i] = 0.0;
+    }
+    /// The position across the line of sample `i` (the column of a vertical line), NaN where
+    /// none.
+    pub fn across(&self, i: usize) -> f32 {
+        match self.orientation {
+            Orientation::Vertical => self.u[i],
+            Orientation::Horizontal => self.v[i],
+        }
+    }
+    fn reset(&mut self, orientation: Orientation, w: u32, h: u32, n: usize, color: bool) {
+        self.orientation = orientation;
+        self.image_width = w;
+        self.image_height = h;
+        for buf in [&mut self.u, &mut self.v] {
+            buf.clear();
+            buf.resize(n, f32::NAN);
+        }
+        for buf in [&mut self.strength, &mut self.width] {
+            buf.clear();
+            buf.resize(n, 0.0);
+        }
+        self.rgb.clear();
+        if color {
+            self.rgb.resize(3 * n, 0);
+        }
+    }
+}
+
+/// One located peak in a profile.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Peak {
+    pos: f32,
+    strength: f32,
+    width: f32,
+    saturated: bool,
+    /// A narrow line's fitted form: its sigma (pixels), or the one edge that awaits the
+    /// frame's sigma (`pos` holds the centre of gravity until then).
+    fit: Option<Fit>,
+}
+
+/// The background beside a peak: each flank's mean and centre, and the noise.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Flanks {
+    /// Mean and centre (sample position) of the left flank.
+    left: (f32, f32),
+    /// Mean and centre of the right flank.
+    right: (f32, f32),
+    /// Pooled mean of both flanks.
+    mean: f32,
+    /// Standard deviation of each flank about its own mean, pooled (so a shading slope between
+    /// the two flanks is not counted as noise).
+    noise: f32,
+}
+
+/// The flanks outside `m +/- gap`, each `flank` samples long. `None` unless both lie inside the
+/// profile with at least half their length: a peak at the edge of the row or of the region
+/// searched may be the cut-off halo of a line outside it, and is not a line.
+#[inline]
+fn background<S: Sample>(p: &[S], m: usize, gap: usize, flank: usize) -> Option<Flanks> {
+    let need = flank.div_ceil(2).max(1);
+    let end = m.checked_sub(gap)?;
+    let start = end.saturating_sub(flank);
+    let rstart = m + gap + 1;
+    let rend = (rstart + flank).min(p.len());
+    if end - start < need || rend < rstart + need {
+        return None;
+    }
+    let (l, r) = (side(p, start, end), side(p, rstart, rend));
+    let n = (l.count + r.count) as f32;
+    Some(Flanks {
+        left: (l.mean, l.centre),
+        right: (r.mean, r.centre),
+        mean: (l.mean * l.count as f32 + r.mean * r.count as f32) / n,
+        noise: ((l.ss + r.ss).max(0.0) / n).sqrt(),
+    })
+}
+
+/// One flank's level: its mean, where it was taken, and the sum of squares about it.
+struct Side {
+    mean: f32,
+    centre: f32,
+    ss: f32,
+    count: usize,
+}
+
+/// The level of `p[start..end]`: its mean, or, where its two halves disagree by more than the
+/// quieter half's noise allows (another line, a highlight or an edge reaching into the flank), the
+/// darker half's.
+#[inline]
+fn side<S: Sample>(p: &[S], start: usize, end: usize) -> Side {
+    let k = end - start;
+    let h = k / 2;
+    let (a, b) = S::moments(p, start, start + h);
+    let (c, d) = S::moments(p, start + h, end);
+    let whole = |a: f32, b: f32, k: usize, start: usize| Side {
+        mean: a / k as f32,
+        centre: 0.5 * (2 * start + k) as f32 - 0.5,
+        ss: b - a * a / k as f32,
+        count: k,
+    };
+    if h < 2 {
+        return whole(a + c, b + d, k, start);
+    }
+    let (first, second) = (whole(a, b, h, start), whole(c, d, k - h, start + h));
+    let sd = |s: &Side| (s.ss.max(0.0) / s.count as f32).sqrt();
+    if (first.mean - second.mean).abs() <= HALF_AGREEMENT * sd(&first).min(sd(&second)) + 1.0 {
+        Side { ss: first.ss + second.ss, ..whole(a + c, b + d, k, start) }
+    } else if first.mean < second.mean {
+        first
+    } else {
+        second
+    }
+}
+
+/// The halves of a flank agree when their means differ by at most this many noise standard
+/// deviations (plus one grey level of quantisation).
+const HALF_AGREEMENT: f32 = 3.0;
+
+/// Linear-interpolated position where the profile crosses `level` between `i` (below) and `j`.
+fn crossing<S: Sample>(p: &[S], i: usize, j: usize, level: f32) -> f32 {
+    let (a, b) = (p[i].f(), p[j].f());
+    let t = if (b - a).abs() > f32::EPSILON { (level - a) / (b - a) } else { 0.5 };
+    i as f32 + (j as f32 - i as f32) * t.clamp(0.0, 1.0)
+}
+
+/// The samples' scale relative to 8-bit grey levels.
+fn level_scale(encoding: Encoding) -> f32 {
+    if encoding == Encoding::Mono16 {
+        257.0
+    } else {
+        1.0
+    }
+}
+
+/// Locates a line whose brightest sample is `m`, or refuses it: too weak for the local noise,
+/// a step rather than a peak, cut off by the edge of the profile, or too wide.
+fn find_peak<S: Sample>(
+    p: &[S],
+    m: usize,
+    cfg: &EdgeConfig,
+    scale: f32,
+    saturation: f32,
+) -> Result<Peak, (usize, usize)> {
+    let n = p.len();
+    let peak = p[m].f();
+    let max_hw = cfg.max_half_width_px as usize;
+    let flank = cfg.flank_px as usize;
+    // First pass: the run above half of the peak over the background nearby gives the gap
+    // that keeps the background flanks off the line.
+    // Wide enough that the flanks clear most lines on the first try.
+    let gap0 = max_hw.min(6);
+    let Some(f0) = background(p, m, gap0, flank) else {
+        return Err((m.saturating_sub(gap0), m + gap0));
+    };
+    let half0 = S::cut(f0.mean + 0.5 * (peak - f0.mean));
+    // One sample further than a line may reach, so that a line too wide shows as such.
+    let (lo, hi) = S::run(p, m, max_hw + 1, half0);
+    let run = (lo.saturating_sub(1), hi + 1);
+    let gap = (2 * (m - lo).max(hi - m) + 2).min(max_hw);
+    // A narrower line keeps the first flanks (they are clear of it, only a little further out).
+    let gap = gap.max(gap0);
+    let f = match if gap == gap0 { Some(f0) } else { background(p, m, gap, flank) } {
+        Some(f) => f,
+        None => return Err(run),
+    };
+    let bg = f.mean;
+    let strength = peak - bg;
+    let floor = (cfg.min_strength * scale).max(cfg.noise_factor * f.noise);
+    if strength < floor || strength <= 0.0 {
+        return Err(run);
+    }
+    // A peak, not a step: it rises above the background on both sides.
+    let (rise_l, rise_r) = (peak - f.left.0, peak - f.right.0);
+    if rise_l.min(rise_r) < floor.max(cfg.min_side_ratio * rise_l.max(rise_r)) {
+        return Err(run);
+    }
+    // Full width at half maximum.
+    let half = bg + 0.5 * strength;
+    // With the first flanks, `half` is the first pass's level and its run is already known.
+    let (l, r) = if gap == gap0 { (lo, hi) } else { S::run(p, m, max_hw + 1, S::cut(half)) };
+    if l == 0 || r + 1 >= n {
+        return Err(run); // the line runs into the edge of the profile
+    }
+    let left = crossing(p, l - 1, l, half);
+    let right = crossing(p, r + 1, r, half);
+    let width = right - left;
+    if width > cfg.max_width_px || m - l > max_hw || r - m > max_hw {
+        return Err(run);
+    }
+    let saturated = peak >= saturation;
+    let cog = |p: &[S]| center_of_gravity(p, m, bg + cfg.peak_fraction * strength, max_hw);
+    let mut fit = None;
+    let pos = if !saturated && width < cfg.narrow_width_px {
+        // The fit's run: above the centre-of-gravity level, and one sample more on each side.
+        let (a, b) = S::run(p, m, max_hw, S::cut(bg + cfg.peak_fraction * strength));
+        let (a, b) = (a.saturating_sub(1), (b + 1).min(n - 1));
+        fit = integrated_gaussian(p, (a, m, b), (f.left.1, f.left.0), (f.right.1, f.right.0));
+        match fit {
+            Some(Fit::Centre { centre, .. }) => centre,
+            _ => cog(p).ok_or(run)?,
+        }
+    } else {
+        match cfg.method {
+            Method::Parabolic if !saturated => {
+                let (a, b, c) = (p[m - 1].f(), peak, p[m + 1].f());
+                let den = a - 2.0 * b + c;
+                Some(if den < 0.0 { m as f32 + (0.5 * (a - c) / den).clamp(-0.5, 0.5) } else { m as f32 })
+            }
+            Method::Gaussian if !saturated => gaussian_fit(p, m, bg, strength, cfg),
+            _ => cog(p),
+        }
+        .ok_or(run)?
+    };
+    Ok(Peak { pos, strength, width, saturated, fit })
+}
+
+/// The study's method: first rise over five samples above the threshold; integer position.
+fn gradient_edge<S: Sample>(p: &[S], threshold: f32) -> Option<Peak> {
+    (0..p.len().saturating_sub(4))
+        .map(|i| (i, p[i + 4].f() - p[i].f()))
+        .find(|&(_, g)| g > threshold)
+        .map(|(i, g)| Peak { pos: (i + 2) as f32, strength: g, width: 0.0, saturated: false, fit: None })
+}
+
+/// Counters of one detection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DetectStats {
+    /// Samples searched.
+    pub searched: u32,
+    /// Samples with a line.
+    pub found: u32,
+    /// Samples whose peak was saturated.
+    pub saturated: u32,
+    /// Peaks that passed every test of their own row but belonged to a run shorter than
+    /// `min_run` (noise, texture, a highlight, a frame without laser light), dropped.
+    pub short_runs: u32,
+}
+
+/// A reusable detector: owns its scratch buffers so that the hot path does not allocate.
+#[derive(Debug, Default, Clone)]
+pub struct EdgeDetector {
+    config: EdgeConfig,
+    profile: Vec<f32>,
+    /// Per sample: saturated, and a narrow line's fit.
+    state: Vec<(bool, Option<Fit>)>,
+    /// The narrow line's sigma (pixels) as last measured, for the samples of a frame that
+    /// measures none.
+    sigma_px: Option<f32>,
+}
+
+/// Where one detection searches: the image, its region and its signal.
+struct Search<'a, 'b> {
+    image: &'a ImageView<'b>,
+    cfg: &'a EdgeConfig,
+    /// Samples along the line (rows of a vertical line).
+    outer: std::ops::Range<u32>,
+    /// Positions across the line searched (columns of a vertical line).
+    inner: std::ops::Range<u32>,
+    vertical: bool,
+    scale: f32,
+    saturation: f32,
+}
+
+impl Search<'_, '_> {
+    /// The line in sample `s`: the strongest peak that passes every test (up to
+    /// `max_candidates` tried), or with `near = (centre, radius)` the strongest within `radius`
+    /// of `centre` (absolute position across). Position is absolute.
+    fn sample(&self, s: u32, near: Option<(f32, f32)>, buf: &mut Vec<f32>) -> Option<Peak> {
+        let enc = self.image.encoding();
+        let (x0, x1) = (self.inner.start as usize, self.inner.end as usize);
+        let peak = if self.vertical && enc == Encoding::Mono8 {
+            self.locate(&self.image.row(s)[x0..x1], near)
+        } else {
+            fill_profile(self.image, s, self.inner.clone(), self.vertical, self.cfg.channel, buf);
+            self.locate(&buf[..], near)
+        }?;
+        let shift = |f| match f {
+            Fit::Centre { centre, sigma } => Fit::Centre { centre: centre + x0 as f32, sigma },
+            Fit::OneEdge { edge, z } => Fit::OneEdge { edge: edge + x0 as f32, z },
+        };
+        Some(Peak { pos: peak.pos + x0 as f32, fit: peak.fit.map(shift), ..peak })
+    }
+
+    fn locate<S: Sample>(&self, p: &[S], near: Option<(f32, f32)>) -> Option<Peak> {
+        let cfg = self.cfg;
+        if cfg.method == Method::Gradient {
+            return gradient_edge(p, cfg.gradient_threshold * self.scale);
+        }
+        let off = self.inner.start as f32;
+        if let Some((c, r)) = near {
+            let (a, b) = ((c - off - r).max(0.0) as usize, ((c - off + r).max(0.0) as usize + 1).min(p.len()));
+            let m = a + S::argmax(p.get(a..b)?)?;
+            let peak = find_peak(p, m, cfg, self.scale, self.saturation).ok()?;
+            return ((peak.pos + off - c).abs() <= r).then_some(peak);
+        }
+        // Strongest first; a refused peak's run is left out of the next search.
+        let mut refused: [(usize, usize); 16] = [(0, 0); 16];
+        for k in 0..cfg.max_candidates as usize {
+            let m = argmax_outside(p, &refused[..k])?;
+            match find_peak(p, m, cfg, self.scale, self.saturation) {
+                Ok(peak) => return Some(peak),
+                Err(run) => {
+                    refused[k] = run;
+                    refused[..=k].sort_unstable();
+                }
+            }
+        }
+        None
+    }
+}
+
+/// The first maximum of `p` outside the sorted, possibly overlapping closed ranges `skip`.
+fn argmax_outside<S: Sample>(p: &[S], skip: &[(usize, usize)]) -> Option<usize> {
+    if skip.is_empty() {
+        return S::argmax(p);
+    }
+    let mut best: Option<usize> = None;
+    let mut start = 0;
+    for &(a, b) in skip.iter().chain(std::iter::once(&(p.len(), p.len()))) {
+        if a > start {
+            if let Some(m) = S::argmax(&p[start..a.min(p.len())]) {
+                let m = start + m;
+                if best.is_none_or(|b| p[m] > p[b]) {
+                    best = Some(m);
+                }
+            }
+        }
+        start = start.max(b + 1);
+    }
+    best
+}
+
+impl EdgeDetector {
+    /// A detector with a validated configuration.
+    pub fn new(config: EdgeConfig) -> Result<Self, EdgeError> {
+        config.validate()?;
+        Ok(Self { config, ..Default::default() })
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &EdgeConfig {
+        &self.config
+    }
+
+    /// Finds the line in `image`, writing one sample per row (or column) into `out`.
+    ///
+    /// Each row's strongest peak that passes the tests is taken; then runs of samples that
+    /// follow each other (within `max_jump_px`) are extended into their neighbouring rows by a
+    /// search near the run's own course (so a brighter highlight or a texture peak beside the
+    /// line yields to the line), and runs shorter than `min_run` are dropped.
+    pub fn detect(&mut self, image: &ImageView<'_>, out: &mut LaserLine) -> Result<DetectStats, EdgeError> {
+        let cfg = &self.config;
+        let (w, h) = (image.width(), image.height());
+        let roi = cfg.roi;
+        if roi.x_offset >= w || roi.y_offset >= h {
+            return Err(EdgeError::RoiOutside { roi, width: w, height: h });
+        }
+        let x1 = if roi.width == 0 { w } else { (roi.x_offset + roi.width).min(w) };
+        let y1 = if roi.height == 0 { h } else { (roi.y_offset + roi.height).min(h) };
+        let (x0, y0) = (roi.x_offset, roi.y_offset);
+        let enc = image.encoding();
+        let vertical = cfg.line_orientation == Orientation::Vertical;
+        let samples = if vertical { h } else { w };
+        out.reset(cfg.line_orientation, w, h, samples as usize, enc.is_color());
+        let (outer, inner) = if vertical { (y0..y1, x0..x1) } else { (x0..x1, y0..y1) };
+        let search =
+            Search { image, cfg, outer, inner, vertical, scale: level_scale(enc), saturation: enc.max_value() };
+        let mut stats = DetectStats::default();
+        self.state.clear();
+        self.state.resize(samples as usize, (false, None));
+        let put = |out: &mut LaserLine, state: &mut [(bool, Option<Fit>)], s: u32, peak: Option<Peak>| {
+            let i = s as usize;
+            let Some(peak) = peak else {
+                out.clear(i);
+                return;
+            };
+            let (u, v) = if vertical { (peak.pos, s as f32) } else { (s as f32, peak.pos) };
+            out.u[i] = u;
+            out.v[i] = v;
+            out.strength[i] = peak.strength / search.scale;
+            out.width[i] = peak.width;
+            state[i] = (peak.saturated, peak.fit);
+        };
+        for s in search.outer.clone() {
+            stats.searched += 1;
+            let peak = search.sample(s, None, &mut self.profile);
+            put(out, &mut self.state, s, peak);
+        }
+        if cfg.method != Method::Gradient {
+            let profile = &mut self.profile;
+            let state = &mut self.state;
+            track::extend(out, cfg, search.outer.clone(), |out, s, near| {
+                let peak = search.sample(s, Some(near), profile);
+                let found = peak.is_some();
+                put(out, state, s, peak);
+                found
+            });
+            stats.short_runs = track::drop_short_runs(out, cfg, search.outer.clone());
+        }
+        resolve_one_edge_fits(&self.state, &mut self.sigma_px, out);
+        for s in search.outer.clone() {
+            let i = s as usize;
+            if !out.u[i].is_finite() {
+                continue;
+            }
+            stats.found += 1;
+            stats.saturated += u32::from(self.state[i].0);
+            if enc.is_color() {
+                let c = side_colour(image, out.u[i], out.v[i], vertical, cfg.color_offset_px);
+                out.rgb[3 * i..3 * i + 3].copy_from_slice(&c);
+            }
+        }
+        Ok(stats)
+    }
+}
+
+/// Places the narrow-line samples that had one usable edge, with the mean sigma of this frame's
+/// other narrow-line fits (or of the last frame that had any, `sigma_px`).
+fn resolve_one_edge_fits(state: &[(bool, Option<Fit>)], sigma_px: &mut Option<f32>, out: &mut LaserLine) {
+    let (mut sum, mut n, mut pending) = (0.0f32, 0u32, false);
+    for (i, (_, fit)) in state.iter().enumerate() {
+        match fit {
+            Some(Fit::Centre { sigma, .. }) if out.u[i].is_finite() => {
+                sum += sigma;
+                n += 1;
+            }
+            Some(Fit::OneEdge { .. }) => pending = true,
+            _ => {}
+        }
+    }
+    if n > 0 {
+        *sigma_px = Some(sum / n as f32);
+    }
+    let Some(sigma) = sigma_px.filter(|_| pending) else { return };
+    for (i, (_, fit)) in state.iter().enumerate() {
+        let Some(Fit::OneEdge { edge, z }) = *fit else { continue };
+        let centre = edge - z * sigma;
+        let slot = if out.orientation == Orientation::Vertical { &mut out.u[i] } else { &mut out.v[i] };
+        // Within the pixel that the centre of gravity found, or the fit does not apply.
+        if slot.is_finite() && (centre - *slot).abs() <= 0.5 {
+            *slot = centre;
+        }
+    }
+}
+
+/// Copies one row or column of the chosen signal into `buf` as f32.
+fn fill_profile(
+    image: &ImageView<'_>,
+    s: u32,
+    inner: std::ops::Range<u32>,
+    vertical: bool,
+    channel: Channel,
+    buf: &mut Vec<f32>,
+) {
+    buf.clear();
+    let enc = image.encoding();
+    let big_endian = image.is_big_endian();
+    let pixel = |row: &[u8], x: usize| -> f32 {
+        match enc {
+            Encoding::Mono8 => f32::from(row[x]),
+            Encoding::Mono16 => {
+                let b = [row[2 * x], row[2 * x + 1]];
+                f32::from(if big_endian { u16::from_be_bytes(b) } else { u16::from_le_bytes(b) })
+            }
+            Encoding::Rgb8 | Encoding::Bgr8 => {
+                let px = &row[3 * x..3 * x + 3];
+                let (r, g, b) = if enc == Encoding::Rgb8 { (px[0], px[1], px[2]) } else { (px[2], px[1], px[0]) };
+                let (r, g, b) = (f32::from(r), f32::from(g), f32::from(b));
+                match channel {
+                    Channel::Red => r,
+                    Channel::Luma => crate::image::luma(r, g, b),
+                    Channel::RedMinusOthers => (r - 0.5 * (g + b)).max(0.0),
+                }
+            }
+        }
+    };
+    if vertical {
+        let row = image.row(s);
+        let (x0, x1) = (inner.start as usize, inner.end as usize);
+        match (enc, channel) {
+            // Colour rows, the common cases: one pass over 3-byte pixels, no per-pixel dispatch.
+            (Encoding::Rgb8 | Encoding::Bgr8, Channel::Red) => {
+                let r = if enc == Encoding::Rgb8 { 0 } else { 2 };
+                buf.extend(row[3 * x0..3 * x1].chunks_exact(3).map(|p| f32::from(p[r])));
+            }
+            (Encoding::Rgb8 | Encoding::Bgr8, Channel::RedMinusOthers) => {
+                let (r, b) = if enc == Encoding::Rgb8 { (0, 2) } else { (2, 0) };
+                buf.extend(
+                    row[3 * x0..3 * x1]
+                        .chunks_exact(3)
+                        .map(|p| (f32::from(p[r]) - 0.5 * (f32::from(p[1]) + f32::from(p[b]))).max(0.0)),
+                );
+            }
+            _ => buf.extend(inner.map(|x| pixel(row, x as usize))),
+        }
+    } else {
+        buf.extend(inner.map(|y| pixel(image.row(y), s as usize)));
+    }
+}
+
+/// Mean colour at `offset` pixels either side of the line centre, across the line.
+fn side_colour(image: &ImageView<'_>, u: f32, v: f32, vertical: bool, offset: f32) -> [u8; 3] {
+    let mut acc = [0u32; 3];
+    let mut n = 0;
+    for sign in [-1.0f32, 1.0] {
+        let (x, y) = if vertical { (u + sign * offset, v) } else { (u, v + sign * offset) };
+        let (x, y) = (x.round(), y.round());
+        if x < 0.0 || y < 0.0 || x >= image.width() as f32 || y >= image.height() as f32 {
+            continue;
+        }
+        let c = image.rgb_at(x as u32, y as u32);
+        for k in 0..3 {
+            acc[k] += u32::from(c[k]);
+        }
+        n += 1;
+    }
+    if n == 0 {
+        return [0; 3];
+    }
+    [(acc[0] / n) as u8, (acc[1] / n) as u8, (acc[2] / n) as u8]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::lanes::{walk_left, walk_right};
+    use super::*;
+    use crate::image::Image;
+
+    proptest::proptest! {
+        /// The byte path (masked 16-byte flanks, integer walks, integer sums) takes the same
+        /// decisions as the float path on the same samples, and finds the same centre.
+        #[test]
+        fn byte_and_float_profiles_agree(
+            n in 8usize..120,
+            c in 0.0f64..1.0,
+            sigma in 0.4f64..4.0,
+            amp in 0.0f64..260.0,
+            bg in 0.0f64..80.0,
+            noise in proptest::collection::vec(-12i32..12, 120),
+            method in 0usize..3,
+        ) {
+            let c = c * n as f64;
+            let row: Vec<u8> = (0..n)
+                .map(|i| {
+                    let d = (i as f64 - c) / sigma;
+                    (bg + amp * (-0.5 * d * d).exp() + f64::from(noise[i])).round().clamp(0.0, 255.0) as u8
+                })
+                .collect();
+            let float: Vec<f32> = row.iter().map(|&v| f32::from(v)).collect();
+            let method = [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic][method];
+            let cfg = EdgeConfig { method, ..Default::default() };
+            let a = u8::argmax(&row).and_then(|m| find_peak(&row, m, &cfg, 1.0, 255.0).ok());
+            let b = f32::argmax(&float).and_then(|m| find_peak(&float, m, &cfg, 1.0, 255.0).ok());
+            proptest::prop_assert_eq!(a.is_some(), b.is_some(), "{:?} {:?} {:?}", row, a, b);
+            if let (Some(a), Some(b)) = (a, b) {
+                proptest::prop_assert!((a.pos - b.pos).abs() < 1e-3, "{:?} {:?}", a, b);
+                proptest::prop_assert!((a.width - b.width).abs() < 1e-4);
+                proptest::prop_assert_eq!(a.strength, b.strength);
+            }
+        }
+    }
+
+    proptest::proptest! {
+        /// The vectorised byte primitives against one-sample-at-a-time walks and search.
+        #[test]
+        fn byte_runs_and_argmax_match_scalar(
+            row in proptest::collection::vec(0u8..=255, 0..80),
+            m in 0usize..80,
+            reach in 0usize..20,
+            cut in -3i32..260,
+            small in proptest::collection::vec(0u8..4, 0..80),
+        ) {
+            // Random bytes against any cut, and runs of few levels against cuts among them.
+            for (p, cut) in [(&row[..], cut), (&small[..], cut.rem_euclid(5) - 1)] {
+                let expected = p.iter().enumerate().fold(None, |b: Option<(usize, u8)>, (i, &v)| match b {
+                    Some((_, bv)) if bv >= v => b,
+                    _ => Some((i, v)),
+                });
+                proptest::prop_assert_eq!(argmax_u8(p), expected.map(|(i, _)| i));
+                if m < p.len() {
+                    let scalar = (walk_left(p, m, m.saturating_sub(reach), cut), walk_right(p, m, m + reach, cut));
+                    proptest::prop_assert_eq!(u8::run(p, m, reach, cut), scalar, "{:?} m {} reach {} cut {}", p, m, reach, cut);
+                }
+            }
+        }
+    }
+
+    /// A mono8 image with a vertical Gaussian line at column `c` (box-integrated over each pixel).
+    fn line_image(w: u32, h: u32, c: f64, sigma: f64, amp: f64, bg: f64) -> Image {
+        let mut img = Image::new(w, h, Encoding::Mono8);
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = 0.0;
+                for k in 0..16 {
+                    let xs = x as f64 - 0.5 + (k as f64 + 0.5) / 16.0;
+                    acc += (-(xs - c).powi(2) / (2.0 * sigma * sigma)).exp();
+                }
+                let val = bg + amp * acc / 16.0;
+                img.data[(y * w + x) as usize] = val.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        img
+    }
+
+    fn detect(img: &Image, cfg: EdgeConfig) -> LaserLine {
+        let mut d = EdgeDetector::new(cfg).unwrap();
+        let mut out = LaserLine::default();
+        d.detect(&img.view().unwrap(), &mut out).unwrap();
+        out
+    }
+
+    #[test]
+    fn constant_image_has_no_line() {
+        let mut img = Image::new(64, 8, Encoding::Mono8);
+        img.data.fill(120);
+        for m in [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic, Method::Gradient] {
+            let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+            assert_eq!(out.found(), 0, "{m:?}");
+            assert_eq!(out.len(), 8);
+            assert!(out.u.iter().all(|u| u.is_nan()));
+        }
+    }
+
+    #[test]
+    fn gaussian_line_found_within_005_px() {
+        for m in [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic] {
+            for k in 0..10 {
+                let c = 30.0 + k as f64 * 0.1 + 0.013;
+                let img = line_image(64, 16, c, 1.6, 200.0, 20.0);
+                let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+                let err = (f64::from(out.u[0]) - c).abs();
+                assert!(err < 0.05, "{m:?} at {c}: found {} (err {err})", out.u[0]);
+                let fwhm = 2.3548 * 1.6;
+                assert!((f64::from(out.width[0]) - fwhm).abs() < 0.3, "{m:?} width {}", out.width[0]);
+                assert!((out.strength[0] - 200.0).abs() < 15.0, "strength {}", out.strength[0]);
+            }
+        }
+    }
+
+    #[test]
+    fn gradient_method_is_integer_and_on_the_rising_edge() {
+        let img = line_image(64, 8, 30.37, 1.6, 200.0, 20.0);
+        let out = detect(&img, EdgeConfig { method: Method::Gradient, ..Default::default() });
+        let u = out.u[0];
+        assert_eq!(u, u.round());
+        assert!((25.0..30.37).contains(&u), "{u}");
+    }
+
+    #[test]
+    fn saturated_line_is_centred() {
+        let img = line_image(64, 16, 40.3, 2.0, 600.0, 10.0);
+        assert!(img.data.iter().filter(|&&v| v == 255).count() > 2);
+        for m in [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic] {
+            let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+            assert!((out.u[0] - 40.3).abs() < 0.05, "{m:?}: {}", out.u[0]);
+        }
+    }
+
+    #[test]
+    fn strongest_of_two_peaks_is_chosen() {
+        let a = line_image(100, 8, 25.2, 1.5, 90.0, 10.0);
+        let b = line_image(100, 8, 70.6, 1.5, 180.0, 0.0);
+        let mut img = a.clone();
+        for (d, s) in img.data.iter_mut().zip(&b.data) {
+            *d = d.saturating_add(*s);
+        }
+        let out = detect(&img, EdgeConfig::default());
+        assert!((out.u[0] - 70.6).abs() < 0.05, "{}", out.u[0]);
+    }
+
+    #[test]
+    fn dim_line_over_noise_found_and_noise_alone_not() {
+        // Deterministic pseudo-noise of +-3 grey levels, a line of 25 levels.
+        let mut img = line_image(200, 8, 120.4, 1.5, 25.0, 40.0);
+        let mut s = 12345u32;
+        let mut noisy = img.clone();
+        for d in noisy.data.iter_mut() {
+            s = s.wrapping_mul(1664525).wrapping_add(1013904223);
+            *d = (i32::from(*d) + (s >> 29) as i32 - 3).clamp(0, 255) as u8;
+        }
+        let out = detect(&noisy, EdgeConfig::default());
+        assert!((out.u[0] - 120.4).abs() < 0.3, "{}", out.u[0]);
+        img.data = noisy.data.iter().zip(&img.data).map(|(n, c)| n.wrapping_sub(*c).wrapping_add(40)).collect();
+        let out = detect(&img, EdgeConfig::default());
+        assert_eq!(out.found(), 0);
+    }
+
+    #[test]
+    fn horizontal_orientation_and_roi() {
+        let img = line_image(32, 40, 17.25, 1.5, 200.0, 0.0);
+        // Transpose into a horizontal line at row 17.25.
+        let mut t = Image::new(40, 32, Encoding::Mono8);
+        for y in 0..40u32 {
+            for x in 0..32u32 {
+                t.data[(x * 40 + y) as usize] = img.data[(y * 32 + x) as usize];
+            }
+        }
+        let cfg = EdgeConfig {
+            line_orientation: Orientation::Horizontal,
+            roi: Roi { x_offset: 5, y_offset: 0, width: 10, height: 0 },
+            ..Default::default()
+        };
+        let out = detect(&t, cfg);
+        assert_eq!(out.len(), 40);
+        assert_eq!(out.found(), 10);
+        assert!(out.u[4].is_nan() && out.u[15].is_nan());
+        assert!((out.v[7] - 17.25).abs() < 0.05 && out.u[7] == 7.0);
+    }
+
+    #[test]
+    fn colour_channels_and_side_colour() {
+        let grey = line_image(80, 8, 40.0, 1.5, 150.0, 0.0);
+        let mut img = Image::new(80, 8, Encoding::Bgr8);
+        for (i, &g) in grey.data.iter().enumerate() {
+            // A white-ish surface (B=G=R=90) with a red laser on top.
+            img.data[3 * i] = 90;
+            img.data[3 * i + 1] = 90;
+            img.data[3 * i + 2] = 90u8.saturating_add(g);
+        }
+        for ch in [Channel::Red, Channel::Luma, Channel::RedMinusOthers] {
+            let out = detect(&img, EdgeConfig { channel: ch, ..Default::default() });
+            assert!((out.u[0] - 40.0).abs() < 0.05, "{ch:?} {}", out.u[0]);
+            assert_eq!(&out.rgb[..3], &[90, 90, 90]);
+        }
+    }
+
+    #[test]
+    fn mono16_scaled_thresholds() {
+        let g = line_image(64, 8, 20.6, 1.5, 200.0, 10.0);
+        let mut img = Image::new(64, 8, Encoding::Mono16);
+        for (i, &v) in g.data.iter().enumerate() {
+            img.data[2 * i..2 * i + 2].copy_from_slice(&(u16::from(v) * 257).to_le_bytes());
+        }
+        let out = detect(&img, EdgeConfig::default());
+        assert!((out.u[0] - 20.6).abs() < 0.05);
+        assert!((out.strength[0] - 190.0).abs() < 15.0, "{}", out.strength[0]);
+    }
+
+    #[test]
+    fn bad_config_and_roi_are_typed_errors() {
+        assert!(EdgeDetector::new(EdgeConfig { peak_fraction: 1.5, ..Default::default() }).is_err());
+        assert!(EdgeDetector::new(EdgeConfig { min_strength: f32::NAN, ..Default::default() }).is_err());
+        let img = Image::new(10, 10, Encoding::Mono8);
+        let mut d =
+            EdgeDetector::new(EdgeConfig { roi: Roi { x_offset: 20, ..Default::default() }, ..Default::default() })
+                .unwrap();
+        let mut out = LaserLine::default();
+        assert!(matches!(d.detect(&img.view().unwrap(), &mut out), Err(EdgeError::RoiOutside { .. })));
+    }
+
+    /// A mono8 row image (`h` rows) from a function of the column's left and right pixel edges.
+    fn image_from(w: u32, h: u32, f: impl Fn(u32, f64, f64) -> f64) -> Image {
+        let mut img = Image::new(w, h, Encoding::Mono8);
+        for y in 0..h {
+            for x in 0..w {
+                let v = f(y, x as f64 - 0.5, x as f64 + 0.5);
+                img.data[(y * w + x) as usize] = v.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        img
+    }
+
+    /// The share of a Gaussian line's light (centre `c`, FWHM `fwhm`) that falls on the pixel
+    /// [a, b]: the box-integrated Gaussian, by Simpson's rule on 400 intervals.
+    fn box_line(a: f64, b: f64, c: f64, fwhm: f64) -> f64 {
+        let s = fwhm / 2.354_820_045;
+        let n = 400;
+        let h = (b - a) / n as f64;
+        let g = |x: f64| (-0.5 * ((x - c) / s).powi(2)).exp() / (s * (2.0 * std::f64::consts::PI).sqrt());
+        let mut acc = 0.0;
+        for i in 0..=n {
+            let w = if i == 0 || i == n {
+                1.0
+            } else if i % 2 == 1 {
+                4.0
+            } else {
+                2.0
+            };
+            acc += w * g(a + i as f64 * h);
+        }
+        acc * h / 3.0
+    }
+
+    /// Largest error of each method over 20 sub-pixel phases of an 8-bit line (amplitude 200
+    /// over a background of 20, no noise), for FWHM `fwhm` px (before the pixels integrate it).
+    fn phase_bias(method: Method, fwhm: f64) -> f64 {
+        let mut worst = 0.0f64;
+        // Row k holds phase k / 20: the line crosses the rows at a slant, as a real one does.
+        let centre = |k: u32| 40.0 + f64::from(k) / 20.0;
+        // 200 grey levels on the pixel that a centred line would light most.
+        let top = box_line(-0.5, 0.5, 0.0, fwhm);
+        let img = image_from(80, 20, |y, a, b| 20.0 + 200.0 * box_line(a, b, centre(y), fwhm) / top);
+        let out = detect(&img, EdgeConfig { method, ..Default::default() });
+        for k in 0..20 {
+            let u = f64::from(out.u[k as usize]);
+            worst = worst.max(if u.is_finite() { (u - centre(k)).abs() } else { f64::INFINITY });
+        }
+        worst
+    }
+
+    #[test]
+    fn no_pixel_locking_for_lines_half_a_pixel_to_three_wide() {
+        let mut failed = Vec::new();
+        for fwhm in [0.5, 1.0, 1.5, 2.0, 3.0, 4.0] {
+            let mut line = format!("FWHM {fwhm} px, largest error over 20 phases:");
+            for m in [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic, Method::Gradient] {
+                let b = phase_bias(m, fwhm);
+                line += &format!(" {} {b:.4}", m.name());
+                if m != Method::Gradient && b > 0.03 {
+                    failed.push(format!("{m:?} at FWHM {fwhm} px: error up to {b:.4} px"));
+                }
+            }
+            eprintln!("{line}");
+        }
+        assert!(failed.is_empty(), "{failed:#?}");
+    }
+
+    /// Adds zero-mean pseudo-random noise of standard deviation `sd` to every pixel.
+    fn add_noise(img: &mut Image, sd: f64, seed: u64) {
+        let mut rng = crate::synth::SplitMix::new(seed);
+        for d in img.data.iter_mut() {
+            *d = (f64::from(*d) + sd * rng.normal()).round().clamp(0.0, 255.0) as u8;
+        }
+    }
+
+    const SUBPIXEL_METHODS: [Method; 3] = [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic];
+
+    #[test]
+    fn step_edge_is_not_a_line() {
+        // A bright object's edge against a darker background, blurred, with and without the
+        // overshoot that sharpening or JPEG leaves; and a bright band wider than any line.
+        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.8).exp());
+        let step = image_from(120, 30, |_, a, _| 40.0 + 160.0 * smooth(a + 0.5 - 60.3));
+        let ringing = image_from(120, 30, |_, a, _| {
+            let x = a + 0.5 - 60.3;
+            40.0 + 160.0 * smooth(x) + 18.0 * (-(x - 1.5).powi(2) / 2.0).exp()
+        });
+        let band = image_from(120, 30, |_, a, _| if (40.0..80.0).contains(&(a + 0.5)) { 190.0 } else { 40.0 });
+        for (name, mut img) in [("step", step), ("ringing step", ringing), ("wide band", band)] {
+            add_noise(&mut img, 1.5, 3);
+            for m in SUBPIXEL_METHODS {
+                let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+                assert_eq!(out.found(), 0, "{name}, {m:?}: {:?}", &out.u[..5]);
+            }
+        }
+    }
+
+    #[test]
+    fn laser_off_frame_gives_no_samples() {
+        // Room light on a textured scene: smooth shading, a specular highlight, short bright
+        // marks and sensor noise, and no laser.
+        let mut rng = crate::synth::SplitMix::new(11);
+        let marks: Vec<(f64, f64)> = (0..40).map(|_| (rng.uniform() * 200.0, rng.uniform() * 120.0)).collect();
+        let mut img = image_from(200, 120, |y, a, _| {
+            let (x, y) = (a + 0.5, f64::from(y));
+            let mut v = 60.0 + 30.0 * (x / 37.0).sin() * (y / 23.0).cos();
+            v += 150.0 * (-((x - 140.0).powi(2) + (y - 60.0).powi(2)) / (2.0 * 9.0)).exp();
+            for &(mx, my) in &marks {
+                if (y - my).abs() < 1.5 {
+                    v += 70.0 * (-(x - mx).powi(2) / 1.2).exp();
+                }
+            }
+            v
+        });
+        add_noise(&mut img, 2.0, 5);
+        for m in SUBPIXEL_METHODS {
+            let mut d = EdgeDetector::new(EdgeConfig { method: m, ..Default::default() }).unwrap();
+            let mut out = LaserLine::default();
+            let stats = d.detect(&img.view().unwrap(), &mut out).unwrap();
+            assert_eq!(out.found(), 0, "{m:?}: {stats:?}");
+        }
+    }
+
+    #[test]
+    fn highlight_beside_the_line_does_not_take_its_place() {
+        // A line down column 40.3 and, beside it, a highlight brighter than the line.
+        let mut img = image_from(120, 60, |y, a, b| {
+            let h = 250.0 * (-((a + 0.5 - 56.0).powi(2) + (f64::from(y) - 30.0).powi(2)) / (2.0 * 4.0)).exp();
+            30.0 + 120.0 * box_line(a, b, 40.3, 2.5) / box_line(-0.5, 0.5, 0.0, 2.5) + h
+        });
+        add_noise(&mut img, 1.5, 9);
+        for m in SUBPIXEL_METHODS {
+            let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+            for (y, &u) in out.u.iter().enumerate() {
+                assert!((u - 40.3).abs() < 0.15, "{m:?} row {y}: {u}: {:?}", &img.data[y * 120 + 20..y * 120 + 76]);
+            }
+        }
+    }
+
+    /// The signal-to-noise ratio (line amplitude over the noise's standard deviation) down to
+    /// which a dim line on a dark surface is found.
+    const STATED_SNR: f64 = 8.0;
+
+    #[test]
+    fn dim_line_on_a_dark_surface_is_found_at_the_stated_snr() {
+        let noise = 2.0;
+        let amp = STATED_SNR * noise;
+        let top = box_line(-0.5, 0.5, 0.0, 3.0);
+        let centre = |y: u32| 60.0 + 0.13 * f64::from(y);
+        let mut img = image_from(140, 200, |y, a, b| 8.0 + amp * box_line(a, b, centre(y), 3.0) / top);
+        add_noise(&mut img, noise, 21);
+        for m in SUBPIXEL_METHODS {
+            let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+            let errs: Vec<f64> = (0..200u32)
+                .filter_map(|y| Some(f64::from(out.u[y as usize]) - centre(y)).filter(|e| e.is_finite()))
+                .collect();
+            assert!(errs.len() >= 190, "{m:?}: found in {} of 200 rows", errs.len());
+            let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+            assert!(rms < 0.3, "{m:?}: rms {rms} px");
+        }
+        // Noise alone at the same level gives nothing.
+        let mut flat = image_from(140, 200, |_, _, _| 8.0);
+        add_noise(&mut flat, noise, 22);
+        assert_eq!(detect(&flat, EdgeConfig::default()).found(), 0);
+    }
+
+    #[test]
+    fn region_boundary_never_makes_a_line() {
+        // A line at column 18: its falling halo enters a region that starts at column 22, and
+        // the image's own edge cuts a line at column 1.
+        let img =
+            image_from(120, 30, |_, a, b| 20.0 + 200.0 * box_line(a, b, 18.0, 3.0) / box_line(-0.5, 0.5, 0.0, 3.0));
+        let roi = Roi { x_offset: 22, width: 80, ..Default::default() };
+        for m in SUBPIXEL_METHODS {
+            assert_eq!(detect(&img, EdgeConfig { method: m, roi, ..Default::default() }).found(), 0, "{m:?}");
+        }
+        let edge =
+            image_from(120, 30, |_, a, b| 20.0 + 200.0 * box_line(a, b, 0.6, 3.0) / box_line(-0.5, 0.5, 0.0, 3.0));
+        for m in SUBPIXEL_METHODS {
+            assert_eq!(detect(&edge, EdgeConfig { method: m, ..Default::default() }).found(), 0, "{m:?}");
+        }
+    }
+
+    /// Debug aid (run with --ignored --nocapture): the spread of each estimate under sensor
+    /// noise, by width.
+    #[test]
+    #[ignore]
+    fn noise_spread_by_width() {
+        for fwhm in [1.0, 2.0, 3.0, 3.5, 4.0] {
+            for narrow in [0.0f32, 10.0] {
+                let mut errs = Vec::new();
+                let mut rng = crate::synth::SplitMix::new(7);
+                let top = box_line(-0.5, 0.5, 0.0, fwhm);
+                let centre = |k: u32| 40.0 + f64::from(k % 20) / 20.0;
+                let mut img = image_from(80, 200, |y, a, b| 30.0 + 120.0 * box_line(a, b, centre(y), fwhm) / top);
+                for (i, d) in img.data.iter_mut().enumerate() {
+                    let y = (i / 80) as u32;
+                    let x = (i % 80) as f64;
+                    let v = 30.0 + 120.0 * box_line(x - 0.5, x + 0.5, centre(y), fwhm) / top + 1.5 * rng.normal();
+                    *d = v.round().clamp(0.0, 255.0) as u8;
+                }
+                let out = detect(&img, EdgeConfig { narrow_width_px: narrow, min_run: 1, ..Default::default() });
+                for k in 0..200u32 {
+                    let u = f64::from(out.u[k as usize]);
+                    if u.is_finite() {
+                        errs.push(u - centre(k));
+                    }
+                }
+                let n = errs.len() as f64;
+                let mean = errs.iter().sum::<f64>() / n;
+                let sd = (errs.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / n).sqrt();
+                eprintln!("fwhm {fwhm} narrow {narrow}: n {n} mean {mean:.4} sd {sd:.4}");
+            }
+        }
+    }
+}

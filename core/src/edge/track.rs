@@ -1,0 +1,133 @@
+//! Continuity along the line: runs of samples that follow each other from row to row, their
+//! extension into neighbouring rows by a search near their own course, and the removal of runs
+//! too short to be a laser line.
+
+use super::{EdgeConfig, LaserLine};
+use std::ops::Range;
+
+/// Missing samples a run may step over.
+const MAX_GAP: u32 = 2;
+/// Samples at a run's end from which its course is extrapolated.
+const SLOPE_SPAN: u32 = 3;
+
+/// A run of samples: first and last index, and how many samples it holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct Run {
+    pub first: u32,
+    pub last: u32,
+    pub count: u32,
+}
+
+/// The runs of `line` within `range`: consecutive found samples, at most `MAX_GAP` missing
+/// between two, whose positions across differ by at most `max_jump_px` per step.
+pub(super) fn runs(line: &LaserLine, range: Range<u32>, max_jump_px: f32) -> Vec<Run> {
+    let mut out: Vec<Run> = Vec::new();
+    let mut last: Option<(u32, f32)> = None;
+    for s in range {
+        let x = line.across(s as usize);
+        if !x.is_finite() {
+            continue;
+        }
+        match (last, out.last_mut()) {
+            (Some((ls, lx)), Some(run)) if s - ls <= MAX_GAP + 1 && (x - lx).abs() <= max_jump_px * (s - ls) as f32 => {
+                run.last = s;
+                run.count += 1;
+            }
+            _ => out.push(Run { first: s, last: s, count: 1 }),
+        }
+        last = Some((s, x));
+    }
+    out
+}
+
+/// Extends every run of at least `min_run` samples, longest first, beyond its ends: the next
+/// sample's position is extrapolated from the run's last samples, and `probe(line, s, (centre,
+/// radius))` searches sample `s` near it, writing what it finds (or clearing the sample) and
+/// saying whether it found a peak. A sample that a longer run already holds stops the
+/// extension; one that a shorter run holds is searched again near this run's course.
+pub(super) fn extend(
+    line: &mut LaserLine,
+    cfg: &EdgeConfig,
+    range: Range<u32>,
+    mut probe: impl FnMut(&mut LaserLine, u32, (f32, f32)) -> bool,
+) {
+    let mut list = runs(line, range.clone(), cfg.max_jump_px);
+    if list.len() <= 1 && list.first().is_none_or(|r| r.first == range.start && r.last + 1 == range.end) {
+        return; // one run over the whole range, or none: nothing to extend
+    }
+    // Which run holds each sample (by rank, longest first), so that a longer run keeps its own.
+    list.sort_by(|a, b| b.count.cmp(&a.count).then(a.first.cmp(&b.first)));
+    let n = line.len();
+    let mut owner = vec![u32::MAX; n];
+    for (rank, r) in list.iter().enumerate() {
+        for s in r.first..=r.last {
+            if line.across(s as usize).is_finite() {
+                owner[s as usize] = rank as u32;
+            }
+        }
+    }
+    for (rank, r) in list.iter().enumerate() {
+        if r.count < cfg.min_run {
+            break;
+        }
+        let rank = rank as u32;
+        for forward in [false, true] {
+            let (mut end, mut misses) = (if forward { r.last } else { r.first }, 0u32);
+            loop {
+                let step = misses + 1;
+                let s = if forward { end.checked_add(step) } else { end.checked_sub(step) };
+                let Some(s) = s.filter(|s| range.contains(s)) else { break };
+                if owner[s as usize] < rank {
+                    break;
+                }
+                let centre = extrapolate(line, end, forward, step, cfg.max_jump_px);
+                let radius = cfg.max_jump_px * step as f32;
+                if probe(line, s, (centre, radius)) {
+                    owner[s as usize] = rank;
+                    (end, misses) = (s, 0);
+                } else {
+                    owner[s as usize] = u32::MAX;
+                    misses += 1;
+                    if misses > MAX_GAP {
+                        break;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Where the run ending at `end` is expected `step` samples further on.
+fn extrapolate(line: &LaserLine, end: u32, forward: bool, step: u32, max_jump_px: f32) -> f32 {
+    let x = line.across(end as usize);
+    let back = if forward { end.checked_sub(SLOPE_SPAN) } else { end.checked_add(SLOPE_SPAN) };
+    let slope = back
+        .filter(|&b| (b as usize) < line.len())
+        .map(|b| line.across(b as usize))
+        .filter(|xb| xb.is_finite())
+        .map_or(0.0, |xb| ((x - xb) / SLOPE_SPAN as f32).clamp(-max_jump_px, max_jump_px));
+    x + slope * step as f32
+}
+
+/// A line is long and thin: a run must be at least this many times as long as its mean width
+/// (a highlight or a blob of texture is about as long as it is wide).
+const MIN_LENGTH_PER_WIDTH: f32 = 2.0;
+
+/// Clears every run shorter than `min_run`, or than `MIN_LENGTH_PER_WIDTH` times its mean width;
+/// returns the samples cleared.
+pub(super) fn drop_short_runs(line: &mut LaserLine, cfg: &EdgeConfig, range: Range<u32>) -> u32 {
+    let mut dropped = 0;
+    for r in runs(line, range, cfg.max_jump_px) {
+        let width: f32 = (r.first..=r.last).map(|s| line.width[s as usize]).sum::<f32>() / r.count as f32;
+        if r.count >= cfg.min_run && r.count as f32 >= MIN_LENGTH_PER_WIDTH * width {
+            continue;
+        }
+        for s in r.first..=r.last {
+            if line.across(s as usize).is_finite() {
+                line.clear(s as usize);
+                dropped += 1;
+            }
+        }
+    }
+    dropped
+}
