@@ -1,7 +1,7 @@
 //! Camera frames as image files (the study's `frame_000.bmp`... sequences): BMP (8-bit
 //! palette, 24- and 32-bit, bottom-up or top-down, uncompressed), PGM/PPM (binary, 8 or 16
-//! bits) and PNG (grey 8/16, RGB, palette). Grey images become mono8 or mono16, colour ones rgb8
-//! (BMP's own byte order becomes bgr8). Errors name the file and, where the data is short, the
+//! bits), PNG (grey 8/16, RGB, palette) and JPEG (baseline and progressive, grey or colour).
+//! Grey images become mono8 or mono16, colour ones rgb8 (BMP's own byte order becomes bgr8). Errors name the file and, where the data is short, the
 //! byte offset.
 
 use std::path::{Path, PathBuf};
@@ -17,7 +17,7 @@ pub struct FrameError {
     pub what: String,
 }
 
-/// Reads a frame by its extension (`.bmp`, `.pgm`, `.ppm`, `.png`, any case).
+/// Reads a frame by its extension (`.bmp`, `.pgm`, `.ppm`, `.png`, `.jpg`/`.jpeg`, any case).
 pub fn read_frame(path: &Path) -> Result<Image, FrameError> {
     let err = |what: String| FrameError { file: path.to_path_buf(), what };
     let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
@@ -26,7 +26,8 @@ pub fn read_frame(path: &Path) -> Result<Image, FrameError> {
         "bmp" => bmp(&bytes),
         "pgm" | "ppm" | "pnm" => pnm(&bytes),
         "png" => png_frame(&bytes),
-        other => Err(format!("extension {other:?}: frames must be .bmp, .pgm, .ppm or .png")),
+        "jpg" | "jpeg" => jpeg_frame(&bytes),
+        other => Err(format!("extension {other:?}: frames must be .bmp, .pgm, .ppm, .png or .jpg")),
     }
     .map_err(err)
 }
@@ -235,6 +236,26 @@ pub fn write_pgm(path: &Path, img: &Image) -> Result<(), crate::FileError> {
     let mut b = format!("P5\n# xsurf\n{} {}\n{max}\n", img.width, img.height).into_bytes();
     b.extend_from_slice(&data);
     crate::write_bytes_atomic(path, &b)
+}
+
+/// Decodes a JPEG (baseline or progressive; grey, YCbCr or RGB; not CMYK) into mono8 or rgb8.
+pub fn jpeg_frame(b: &[u8]) -> Result<Image, String> {
+    let mut d = jpeg_decoder::Decoder::new(b);
+    let pixels = d.decode().map_err(|e| format!("JPEG: {e}"))?;
+    let info = d.info().ok_or("JPEG: no frame header")?;
+    let (w, h) = (u32::from(info.width), u32::from(info.height));
+    let enc = match info.pixel_format {
+        jpeg_decoder::PixelFormat::L8 => Encoding::Mono8,
+        jpeg_decoder::PixelFormat::RGB24 => Encoding::Rgb8,
+        other => return Err(format!("JPEG: pixel format {other:?} is not read (grey or colour only)")),
+    };
+    let need = w as usize * h as usize * enc.bytes_per_pixel();
+    if w == 0 || h == 0 || pixels.len() != need {
+        return Err(format!("JPEG: {w}x{h} decoded to {} bytes, {need} expected", pixels.len()));
+    }
+    let mut img = Image::new(w, h, enc);
+    img.data = pixels;
+    Ok(img)
 }
 
 #[cfg(test)]

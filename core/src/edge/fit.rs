@@ -164,3 +164,84 @@ pub(super) enum Fit {
     /// One usable edge at `edge`: the centre is `edge - z * sigma` for the line's sigma.
     OneEdge { edge: f32, z: f32 },
 }
+
+/// Gauss-Newton iterations of [`least_squares_gaussian`].
+const LS_ITERATIONS: usize = 8;
+
+/// Least-squares fit of `b + a exp(-(x - c)^2 / (2 s^2))` to `p[lo..=hi]` (Gauss-Newton from
+/// `init = [b, a, c, s]`), the model a reference fit would use. Saturated samples (at or above
+/// `saturation`) are censored: they only say the line reaches the top of the range, so they are
+/// left out of the residuals and a clipped top cannot bias the centre. Returns the centre, or
+/// `None` when the fit fails or leaves `lo..=hi`.
+pub(super) fn least_squares_gaussian<S: Sample>(
+    p: &[S],
+    lo: usize,
+    hi: usize,
+    init: [f64; 4],
+    saturation: f32,
+) -> Option<f32> {
+    let mut q = init;
+    let free = (lo..=hi).filter(|&i| p[i].f() < saturation).count();
+    if hi >= p.len() || free < 5 || !(q[3] > 0.0) {
+        return None;
+    }
+    for _ in 0..LS_ITERATIONS {
+        let [b, a, c, s] = q;
+        let mut n = [[0.0f64; 4]; 4];
+        let mut g = [0.0f64; 4];
+        for i in lo..=hi {
+            let y = f64::from(p[i].f());
+            if y >= f64::from(saturation) {
+                continue;
+            }
+            let x = i as f64;
+            let d = (x - c) / s;
+            let e = (-0.5 * d * d).exp();
+            let r = y - (b + a * e);
+            let j = [1.0, e, a * e * d / s, a * e * d * d / s];
+            for (k, jk) in j.iter().enumerate() {
+                g[k] += jk * r;
+                for (l, jl) in j.iter().enumerate() {
+                    n[k][l] += jk * jl;
+                }
+            }
+        }
+        let step = solve(n, g)?;
+        for (qk, dk) in q.iter_mut().zip(step) {
+            *qk += dk;
+        }
+        if !(q[3] > 0.05 && q[1] > 0.0) {
+            return None;
+        }
+        if step[2].abs() < 1e-4 {
+            break;
+        }
+    }
+    let c = q[2];
+    (c >= lo as f64 && c <= hi as f64).then_some(c as f32)
+}
+
+/// Solves the system `a x = b` by Gaussian elimination with partial pivoting.
+fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+    for col in 0..N {
+        let piv = (col..N).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
+        if !(a[piv][col].abs() > 1e-12) {
+            return None;
+        }
+        a.swap(col, piv);
+        b.swap(col, piv);
+        for row in col + 1..N {
+            let f = a[row][col] / a[col][col];
+            for k in col..N {
+                a[row][k] -= f * a[col][k];
+            }
+            b[row] -= f * b[col];
+        }
+    }
+    let mut x = [0.0; N];
+    for row in (0..N).rev() {
+        let s: f64 = (row + 1..N).map(|k| a[row][k] * x[k]).sum();
+        x[row] = (b[row] - s) / a[row][row];
+    }
+    Some(x)
+}

@@ -15,7 +15,7 @@ mod lanes;
 mod track;
 
 use crate::image::{Encoding, ImageError, ImageView};
-use fit::{center_of_gravity, gaussian_fit, integrated_gaussian, Fit};
+use fit::{center_of_gravity, gaussian_fit, integrated_gaussian, least_squares_gaussian, Fit};
 pub use lanes::argmax_u8;
 use lanes::Sample;
 use serde::{Deserialize, Serialize};
@@ -29,7 +29,8 @@ pub enum Method {
     /// Centre of gravity of the background-subtracted samples above a fraction of the peak.
     #[default]
     CenterOfGravity,
-    /// Weighted least-squares parabola through the logarithm of the peak (a Gaussian fit).
+    /// Least-squares fit of a Gaussian over a constant background, started from the weighted
+    /// parabola through the logarithm of the peak (Caruana); saturated samples are censored.
     Gaussian,
     /// Parabola through the peak sample and its two neighbours.
     Parabolic,
@@ -143,6 +144,9 @@ pub struct EdgeConfig {
     /// Peaks wider than this (full width at half maximum, pixels) are rejected as smeared
     /// (grazing incidence or a depth edge).
     pub max_width_px: f32,
+    /// Peaks narrower than this (FWHM, pixels) are rejected: a camera whose laser line is wide
+    /// sets it to tell the line from sharpening overshoot at edges and from fine texture.
+    pub min_width_px: f32,
     /// For `gradient`: the five-pixel rise that marks the line, grey levels.
     pub gradient_threshold: f32,
     /// Colour is sampled this far beside the line centre (the study's t +/- d), pixels.
@@ -176,6 +180,7 @@ impl Default for EdgeConfig {
             max_half_width_px: 12,
             flank_px: 10,
             max_width_px: 14.0,
+            min_width_px: 0.0,
             gradient_threshold: 40.0,
             color_offset_px: 8.0,
             min_side_ratio: 0.3,
@@ -234,6 +239,9 @@ impl EdgeConfig {
         }
         if !(self.max_width_px > 0.0) {
             return bad("max_width_px", "must be > 0");
+        }
+        if !(self.min_width_px >= 0.0 && self.min_width_px < self.max_width_px) {
+            return bad("min_width_px", "must be >= 0 and below max_width_px");
         }
         if !(self.gradient_threshold > 0.0) {
             return bad("gradient_threshold", "must be > 0");
@@ -486,7 +494,7 @@ fn find_peak<S: Sample>(
     let left = crossing(p, l - 1, l, half);
     let right = crossing(p, r + 1, r, half);
     let width = right - left;
-    if width > cfg.max_width_px || m - l > max_hw || r - m > max_hw {
+    if width > cfg.max_width_px || width < cfg.min_width_px || m - l > max_hw || r - m > max_hw {
         return Err(run);
     }
     let saturated = peak >= saturation;
@@ -508,7 +516,19 @@ fn find_peak<S: Sample>(
                 let den = a - 2.0 * b + c;
                 Some(if den < 0.0 { m as f32 + (0.5 * (a - c) / den).clamp(-0.5, 0.5) } else { m as f32 })
             }
-            Method::Gaussian if !saturated => gaussian_fit(p, m, bg, strength, cfg),
+            Method::Gaussian => {
+                // The log-parabola (or, on a clipped top, the centre of gravity) starts a
+                // least-squares fit of the Gaussian itself, saturated samples censored.
+                let start = if saturated { cog(p) } else { gaussian_fit(p, m, bg, strength, cfg) };
+                let reach = ((0.8 * width).ceil() as usize).clamp(4, 2 * max_hw);
+                let (a, b) = (m.saturating_sub(reach), (m + reach).min(n - 1));
+                start.and_then(|c| {
+                    let init = [f64::from(bg), f64::from(strength), f64::from(c), f64::from(width / 2.3548)];
+                    least_squares_gaussian(p, a, b, init, saturation)
+                        .filter(|x| (x - c).abs() < 0.5 * width)
+                        .or(Some(c))
+                })
+            }
             _ => cog(p),
         }
         .ok_or(run)?

@@ -57,6 +57,12 @@ pub fn declarations() -> Vec<ParamDecl> {
         decl("flank_px", V::Integer(d.flank_px.into()), "px", "length of each background flank"),
         decl("max_width_px", V::Double(d.max_width_px.into()), "px", "wider peaks (FWHM) are rejected as smeared"),
         decl(
+            "min_width_px",
+            V::Double(d.min_width_px.into()),
+            "px",
+            "narrower peaks (FWHM) are rejected: set it for a camera whose line is wide (edge overshoot, fine texture)",
+        ),
+        decl(
             "gradient_threshold",
             V::Double(d.gradient_threshold.into()),
             "grey levels",
@@ -67,6 +73,36 @@ pub fn declarations() -> Vec<ParamDecl> {
             V::Double(d.color_offset_px.into()),
             "px",
             "colour is sampled this far either side of the line",
+        ),
+        decl(
+            "min_side_ratio",
+            V::Double(d.min_side_ratio.into()),
+            "",
+            "a line rises above the background on both sides: the lower rise is at least this fraction of the higher (a step is not a line)",
+        ),
+        decl(
+            "narrow_width_px",
+            V::Double(d.narrow_width_px.into()),
+            "px",
+            "lines narrower than this (FWHM) are located by a pixel-integrated Gaussian fit, whatever the method (no pixel locking)",
+        ),
+        decl(
+            "max_candidates",
+            V::Integer(d.max_candidates.into()),
+            "",
+            "peaks tried per row, strongest first, until one passes every test",
+        ),
+        decl(
+            "min_run",
+            V::Integer(d.min_run.into()),
+            "rows",
+            "a line runs along at least this many consecutive rows (columns), and at least twice its width; shorter runs are dropped",
+        ),
+        decl(
+            "max_jump_px",
+            V::Double(d.max_jump_px.into()),
+            "px",
+            "largest step of the line centre between neighbouring rows (columns) of one run",
         ),
     ]
 }
@@ -100,8 +136,14 @@ pub fn config(p: &Params) -> Result<EdgeConfig, ParamError> {
         max_half_width_px: u32_param(p, "max_half_width_px")?,
         flank_px: u32_param(p, "flank_px")?,
         max_width_px: p.f64("max_width_px")? as f32,
+        min_width_px: p.f64("min_width_px")? as f32,
         gradient_threshold: p.f64("gradient_threshold")? as f32,
         color_offset_px: p.f64("color_offset_px")? as f32,
+        min_side_ratio: p.f64("min_side_ratio")? as f32,
+        narrow_width_px: p.f64("narrow_width_px")? as f32,
+        max_candidates: u32_param(p, "max_candidates")?,
+        min_run: u32_param(p, "min_run")?,
+        max_jump_px: p.f64("max_jump_px")? as f32,
     };
     c.validate().map_err(|e| match e {
         xsurf_core::edge::EdgeError::InvalidConfig { name, reason } => Params::invalid(name, reason),

@@ -1,0 +1,138 @@
+//! Line finding on frames from real cameras (`../shared/realdata`, README there): a desktop laser
+//! scanner's laser-on/off pairs against an independent reference (a least-squares Gaussian fit
+//! by scipy on the background-subtracted pair, `tests/py/ref_laser_line.py`), and a robot's red
+//! line over floor clutter against hand labels (`tests/data/robot_laser_labels.csv`).
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use xsurf_core::edge::{Channel, EdgeConfig, EdgeDetector, LaserLine, Method, Orientation};
+use xsurf_core::image::{Encoding, Image};
+use xsurf_formats::frames::read_frame;
+
+fn realdata() -> PathBuf {
+    common::root().join("../shared/realdata")
+}
+
+fn detect(img: &Image, cfg: EdgeConfig) -> LaserLine {
+    let mut d = EdgeDetector::new(cfg).unwrap();
+    let mut out = LaserLine::default();
+    d.detect(&img.view().unwrap(), &mut out).unwrap();
+    out
+}
+
+/// The edge detector's parameters for the Ciclop's camera (a Logitech C270 at 960x1280): its
+/// laser line is 5-16 px wide (FWHM), and the camera sharpens edges into 2 px overshoots.
+fn ciclop_camera(method: Method) -> EdgeConfig {
+    EdgeConfig {
+        method,
+        max_width_px: 24.0,
+        max_half_width_px: 16,
+        min_width_px: 4.0,
+        min_strength: 20.0,
+        ..Default::default()
+    }
+}
+
+fn ciclop(name: &str) -> PathBuf {
+    realdata().join("ciclop/laser").join(name)
+}
+
+/// The reference's per-row centres for an on/off pair (None where it finds no line).
+fn reference(on: &Path, off: &Path) -> Option<Vec<Option<f64>>> {
+    let v = common::checker("ref_laser_line.py", &[on, off])?;
+    Some(v["rows"].as_array().unwrap().iter().map(|r| r.as_f64()).collect())
+}
+
+/// How a line compares with the reference, row by row.
+struct Agreement {
+    reference_rows: usize,
+    found: usize,
+    /// |ours - reference| over the rows both have, sorted.
+    errors: Vec<f64>,
+}
+
+impl Agreement {
+    fn new(line: &LaserLine, reference: &[Option<f64>]) -> Self {
+        let mut errors: Vec<f64> = reference
+            .iter()
+            .enumerate()
+            .filter_map(|(y, r)| Some((f64::from(line.u[y]) - (*r)?).abs()).filter(|e| e.is_finite()))
+            .collect();
+        errors.sort_by(f64::total_cmp);
+        Self { reference_rows: reference.iter().flatten().count(), found: errors.len(), errors }
+    }
+    fn quantile(&self, q: f64) -> f64 {
+        self.errors[((self.errors.len() as f64 * q) as usize).min(self.errors.len() - 1)]
+    }
+    fn within(&self, px: f64) -> f64 {
+        self.errors.iter().filter(|&&e| e <= px).count() as f64 / self.errors.len() as f64
+    }
+}
+
+#[test]
+fn ciclop_laser_line_matches_the_scipy_reference() {
+    let (on, off) = (ciclop("laser.png"), ciclop("laser_background.png"));
+    let Some(reference) = reference(&on, &off) else { return };
+    let img = read_frame(&on).unwrap();
+    // The same image with the laser-off twin subtracted: what the reference itself fits.
+    let bg = read_frame(&off).unwrap();
+    let mut diff = Image::new(img.width, img.height, Encoding::Mono8);
+    for (i, d) in diff.data.iter_mut().enumerate() {
+        *d = img.data[3 * i].saturating_sub(bg.data[3 * i]).saturating_add(20);
+    }
+    for method in [Method::Gaussian, Method::CenterOfGravity, Method::Parabolic] {
+        for (input, im) in [("laser-on frame", &img), ("on - off", &diff)] {
+            let a = Agreement::new(&detect(im, ciclop_camera(method)), &reference);
+            eprintln!(
+                "{method:?} on the {input}: {} of the reference's {} rows found; |ours - reference| median {:.3}, \
+                 p90 {:.3}, p99 {:.3} px; {:.1} % within 0.3 px",
+                a.found,
+                a.reference_rows,
+                a.quantile(0.5),
+                a.quantile(0.9),
+                a.quantile(0.99),
+                100.0 * a.within(0.3)
+            );
+            if method != Method::Gaussian {
+                continue;
+            }
+            // The line along its whole visible length, at the reference's centres: the fit of
+            // the same model to the same pixels agrees to a few hundredths of a pixel, and the
+            // laser-on frame alone (the surface's own texture under the line) to a tenth.
+            assert!(
+                a.found as f64 >= 0.98 * a.reference_rows as f64,
+                "{input}: found {} of {}",
+                a.found,
+                a.reference_rows
+            );
+            assert!(a.within(3.0) >= 0.99, "{input}: {:.3} within 3 px: jumps off the line", a.within(3.0));
+            if input == "on - off" {
+                assert!(a.quantile(0.5) <= 0.05 && a.within(0.3) >= 0.9, "{input}: median {}", a.quantile(0.5));
+            } else {
+                assert!(a.quantile(0.5) <= 0.1 && a.within(0.3) >= 0.85, "{input}: median {}", a.quantile(0.5));
+            }
+        }
+    }
+}
+
+#[test]
+fn ciclop_laser_off_frames_give_no_samples() {
+    for name in [
+        "laser_background.png",
+        "pattern-off.png",
+        "pattern-laser-background-0-255-255-8.png",
+        "pattern-laser-background-0-255-255-8-x.png",
+        "texture.png",
+    ] {
+        let img = read_frame(&ciclop(name)).unwrap();
+        for method in [Method::Gaussian, Method::CenterOfGravity, Method::Parabolic] {
+            let line = detect(&img, ciclop_camera(method));
+            eprintln!("{name}, {method:?}: {} samples", line.found());
+            if method == Method::Gaussian {
+                assert_eq!(line.found(), 0, "{name}: samples in a frame without laser light");
+            }
+        }
+    }
+}
