@@ -136,3 +136,52 @@ fn ciclop_laser_off_frames_give_no_samples() {
         }
     }
 }
+
+/// The robot's frames: a red line along the image rows (one sample per column), JPEG.
+fn robot_frame(n: u32) -> Image {
+    read_frame(&realdata().join(format!("robot-laser/img{n:04}.jpg"))).unwrap()
+}
+
+fn robot_camera() -> EdgeConfig {
+    EdgeConfig { line_orientation: Orientation::Horizontal, channel: Channel::RedMinusOthers, ..Default::default() }
+}
+
+#[test]
+fn robot_laser_line_is_found_in_every_frame_at_the_hand_labels() {
+    let labels = std::fs::read_to_string(common::root().join("tests/data/robot_laser_labels.csv")).unwrap();
+    let mut checked = 0;
+    for l in labels.lines().filter(|l| !l.starts_with('#') && !l.starts_with("frame")) {
+        let f: Vec<f64> = l.split(',').map(|v| v.parse().unwrap()).collect();
+        let line = detect(&robot_frame(f[0] as u32), robot_camera());
+        let v = f64::from(line.v[f[1] as usize]);
+        eprintln!("frame {} column {}: label {} found {v:.2}", f[0], f[1], f[2]);
+        assert!((v - f[2]).abs() <= 1.0, "frame {} column {}: label {}, found {v}", f[0], f[1], f[2]);
+        checked += 1;
+    }
+    assert_eq!(checked, 20);
+    // Every frame: the line over most of the width (blocks hide part of it), and no sample off
+    // the line's own course: a jump to the floor's texture shows as a sample far from the
+    // median of its neighbours on both sides (where the line steps over a block's edge, a
+    // sample agrees with one side; where it climbs a block's edge steeply, a few samples on
+    // the climb agree with neither, which allows 4 a frame).
+    for n in 2..=86 {
+        let line = detect(&robot_frame(n), robot_camera());
+        let found = line.found();
+        let median = |r: std::ops::Range<usize>| {
+            let mut v: Vec<f32> = r.map(|k| line.v[k]).filter(|v| v.is_finite()).collect();
+            v.sort_by(f32::total_cmp);
+            v.get(v.len() / 2).copied()
+        };
+        let jumps = (0..line.len())
+            .filter(|&x| line.v[x].is_finite())
+            .filter(|&x| {
+                let (l, r) = (median(x.saturating_sub(15)..x), median(x + 1..(x + 16).min(line.len())));
+                let far = |m: Option<f32>| m.is_some_and(|m| (line.v[x] - m).abs() > 8.0);
+                far(l) && far(r) || (far(l) && r.is_none()) || (far(r) && l.is_none())
+            })
+            .count();
+        eprintln!("frame {n}: {found} of {} columns, {jumps} off the line's course", line.len());
+        assert!(found >= 320, "frame {n}: the line in only {found} columns");
+        assert!(jumps <= 4, "frame {n}: {jumps} samples off the line's course");
+    }
+}

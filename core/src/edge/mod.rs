@@ -175,7 +175,7 @@ impl Default for EdgeConfig {
             channel: Channel::Red,
             roi: Roi::default(),
             min_strength: 8.0,
-            noise_factor: 6.0,
+            noise_factor: 4.0,
             peak_fraction: 0.15,
             max_half_width_px: 12,
             flank_px: 10,
