@@ -85,11 +85,12 @@ impl Orientation {
 #[serde(rename_all = "snake_case")]
 pub enum Channel {
     /// The red channel.
-    #[default]
     Red,
     /// Luma (0.299 R + 0.587 G + 0.114 B).
     Luma,
-    /// Red minus the mean of green and blue, clamped at 0: suppresses white surfaces.
+    /// Red minus the mean of green and blue, clamped at 0: the laser's colour against the
+    /// others, so white surfaces, room light and highlights drop out. The default.
+    #[default]
     RedMinusOthers,
 }
 
@@ -172,7 +173,7 @@ impl Default for EdgeConfig {
         Self {
             method: Method::CenterOfGravity,
             line_orientation: Orientation::Vertical,
-            channel: Channel::Red,
+            channel: Channel::RedMinusOthers,
             roi: Roi::default(),
             min_strength: 8.0,
             noise_factor: 4.0,

@@ -239,6 +239,42 @@ impl Scene {
         Some(Scene { name: name.to_string(), objects: all, travel_start_m: start, travel_end_m: end })
     }
 
+    /// The scene with very dark print or hair: every printed band at reflectance `albedo`, and a
+    /// band added where the scene has none (across the pyramid's middle, the body's hair on the
+    /// top of its head, the sphere's and the cylinder's middle).
+    pub fn with_dark_print(mut self, albedo: f64) -> Scene {
+        let added = match self.name.as_str() {
+            "pyramid" => Some((1, 0.03, 0.07)),
+            "body" => Some((1, -0.01, 0.06)),
+            "sphere" => Some((1, -0.02, 0.02)),
+            "cylinder" => Some((1, -0.03, 0.03)),
+            _ => None,
+        };
+        if let Some((i, y_min, y_max)) = added {
+            if let Some(o) = self.objects.get_mut(i) {
+                o.band.get_or_insert(Band { y_min, y_max, albedo });
+            }
+        }
+        for b in self.objects.iter_mut().filter_map(|o| o.band.as_mut()) {
+            b.albedo = albedo;
+        }
+        self
+    }
+
+    /// True if `p` (on the surface, within 1 mm) lies on a printed band.
+    pub fn in_band(&self, p: Vec3) -> bool {
+        self.objects.iter().filter(|o| !o.internal).any(|o| {
+            o.band.is_some_and(|b| p.y >= b.y_min && p.y <= b.y_max) && sdf(&o.shape, p).abs() < 1e-3
+        })
+    }
+
+    /// True if the surface nearest `p` is the tabletop, at least `margin` metres from every
+    /// object on it.
+    pub fn on_bare_table(&self, p: Vec3, margin: f64) -> bool {
+        self.objects.iter().skip(1).filter(|o| !o.internal).all(|o| sdf(&o.shape, p) > margin)
+            && self.objects.first().is_some_and(|t| sdf(&t.shape, p).abs() < 0.01)
+    }
+
     /// The bare tabletop (for laser-plane calibration sets).
     pub fn tabletop() -> Scene {
         Scene { name: "tabletop".to_string(), objects: vec![table(-1.0, 2.5)], travel_start_m: -0.1, travel_end_m: 0.1 }

@@ -25,7 +25,12 @@ pub fn declarations() -> Vec<ParamDecl> {
             "",
             "vertical: one sample per image row; horizontal: one per column",
         ),
-        decl("channel", V::String("red".into()), "", "signal of colour images: red, luma, red_minus_others"),
+        decl(
+            "channel",
+            V::String("red_minus_others".into()),
+            "",
+            "signal of colour images: red_minus_others (the laser's colour against the others), red, luma",
+        ),
         decl("roi.x_offset", V::Integer(0), "px", "first column searched"),
         decl("roi.y_offset", V::Integer(0), "px", "first row searched"),
         decl("roi.width", V::Integer(0), "px", "columns searched (0: to the edge)"),
