@@ -62,7 +62,8 @@ fn scan(scene: &str, (w, h): (u32, u32), encoding: Encoding, speed: f64, method:
         let v = |p: &[f32; 3]| Vec3::new(p[0].into(), p[1].into(), p[2].into());
         let errs: Vec<f64> = pts.iter().map(|p| sc.signed_distance(v(p)).abs()).collect();
         let n = errs.len().max(1) as f64;
-        let mut table: Vec<f64> = pts.iter().filter(|p| sc.on_bare_table(v(p), 0.01)).map(|p| f64::from(p[2])).collect();
+        let mut table: Vec<f64> =
+            pts.iter().filter(|p| sc.on_bare_table(v(p), 0.01)).map(|p| f64::from(p[2])).collect();
         table.sort_by(f64::total_cmp);
         let band: Vec<Vec3> = truth.iter().copied().filter(|p| sc.in_band(*p)).collect();
         let cov = coverage(&truth, &pts, 0.003);
@@ -118,6 +119,15 @@ fn matrix(scene: &str, speed: f64) {
 }
 
 #[test]
+#[ignore]
+fn probe() {
+    let scene = std::env::var("SCENE").unwrap_or("pyramid".into());
+    let w: u32 = std::env::var("W").map_or(320, |v| v.parse().unwrap());
+    let enc = if std::env::var("RGB").is_ok() { Encoding::Rgb8 } else { Encoding::Mono8 };
+    scan(&scene, (w, w * 3 / 4), enc, 0.07, Method::CenterOfGravity);
+}
+
+#[test]
 fn pyramid_hard() {
     matrix("pyramid", 0.070);
 }
@@ -148,7 +158,150 @@ fn fast_scan_meshes_its_anisotropic_grid() {
     // 140 mm/s at 30 fps: frames 4.7 mm apart, samples about 1 mm apart.
     let cams = scan("phantom", (640, 480), Encoding::Mono8, 0.140, Method::CenterOfGravity);
     for c in &cams {
-        assert!(c.mesh_over_points >= 0.95, "{}: the mesh covers {:.1} % of the points' coverage", c.name, c.mesh_over_points * 100.0);
+        assert!(
+            c.mesh_over_points >= 0.95,
+            "{}: the mesh covers {:.1} % of the points' coverage",
+            c.name,
+            c.mesh_over_points * 100.0
+        );
     }
     check(&cams, 0.0004);
+}
+
+/// Debug aid: the detector's per-row error across the line (pixels) against the projection of
+/// the true observable points, over frames, by effect switched off.
+#[test]
+#[ignore]
+fn probe_rows() {
+    let scene = std::env::var("SCENE").unwrap_or("pyramid".into());
+    let w: u32 = std::env::var("W").map_or(320, |v| v.parse().unwrap());
+    let enc = if std::env::var("RGB").is_ok() { Encoding::Rgb8 } else { Encoding::Mono8 };
+    let rig = Rig::study(w, w * 3 / 4);
+    for variant in [
+        "thin only psf",
+        "thin only psf 1.0",
+        "thin only psf, 600",
+        "thin only psf, noise 2",
+        "thin only psf, speckle",
+        "thin only psf, smear",
+    ] {
+        let mut settings = ScanSettings { encoding: enc, ..Default::default() };
+        Preset::Hard.apply(&mut settings);
+        let mut laser = Preset::Hard.laser();
+        let mut cfg = EdgeConfig::default();
+        match variant {
+            "no psf" => settings.realism.psf_sigma_px = 0.0,
+            "no speckle" => settings.realism.speckle_contrast = 0.0,
+            "no smear" => settings.realism.exposure_s = 0.0,
+            "no saturation" => laser.peak_level = 200.0,
+            "no room" => settings.realism.room_light_level = 0.0,
+            "ideal laser" => laser = xsurf_core::synth::LaserModel::default(),
+            "narrow 0" => cfg.narrow_width_px = 0.0,
+            _ => {}
+        }
+        if variant.starts_with("thin only") || variant == "ideal" {
+            settings = ScanSettings { encoding: enc, noise_sigma: 0.0, ..Default::default() };
+            laser = xsurf_core::synth::LaserModel { sheet_sigma_m: 0.0008, ..Default::default() };
+        }
+        if variant.contains("psf") {
+            settings.realism.psf_sigma_px = if variant.contains("1.0") { 1.0 } else { 0.6 };
+        }
+        if variant.contains("600") {
+            laser.peak_level = 600.0;
+        }
+        if variant.contains("noise") {
+            settings.noise_sigma = 2.0;
+        }
+        if variant.contains("speckle") {
+            settings.realism.speckle_contrast = 0.25;
+        }
+        if variant.contains("smear") {
+            settings.realism.exposure_s = 0.008;
+        }
+        if variant == "thin only 0.4 mm" {
+            laser.sheet_sigma_m = 0.0004;
+        }
+        if variant == "ideal" {
+            laser = xsurf_core::synth::LaserModel::default();
+        }
+        let s = Scanner::new(Scene::by_name(&scene).unwrap(), rig.clone(), laser, settings).unwrap();
+        let cam = &rig.cameras[0];
+        let model = cam.model().unwrap();
+        let mut d = EdgeDetector::new(cfg).unwrap();
+        let mut errs = Vec::new();
+        for f in (20..s.frame_count() - 20).step_by(7) {
+            let ft = s.frame_time(f);
+            let pose =
+                xsurf_core::pose::table_from_carm(ft.travel_m, 0.0, 0.0).compose(&cam.carm_from_optical()).inverse();
+            let mut truth: std::collections::BTreeMap<i64, Vec<f64>> = Default::default();
+            for p in s.observable_points(0, f, 1.0) {
+                if !s.scene.on_bare_table(p, 0.01) {
+                    continue;
+                }
+                if let Some((u, v)) = model.project(pose.transform_point(p)) {
+                    truth.entry(v.round() as i64).or_default().push(u);
+                }
+            }
+            let img = s.render(0, f);
+            let mut line = LaserLine::default();
+            d.detect(&img.view().unwrap(), &mut line).unwrap();
+            for (v, us) in &truth {
+                let e = f64::from(line.u[*v as usize]) - us.iter().sum::<f64>() / us.len() as f64;
+                if e.is_finite() {
+                    errs.push(e);
+                }
+            }
+        }
+        errs.sort_by(f64::total_cmp);
+        let mean = errs.iter().sum::<f64>() / errs.len() as f64;
+        eprintln!("{variant}: {} table rows, mean {mean:+.4} px, median {:+.4} px", errs.len(), errs[errs.len() / 2]);
+    }
+}
+
+/// Debug aid: where the points beyond 5 mm lie (frame, row, point, distance).
+#[test]
+#[ignore]
+fn probe_outliers() {
+    let scene = std::env::var("SCENE").unwrap_or("pyramid".into());
+    let w: u32 = std::env::var("W").map_or(320, |v| v.parse().unwrap());
+    let enc = if std::env::var("RGB").is_ok() { Encoding::Rgb8 } else { Encoding::Mono8 };
+    let h = w * 3 / 4;
+    let rig = Rig::study(w, h);
+    let mut settings = ScanSettings { encoding: enc, ..Default::default() };
+    Preset::Hard.apply(&mut settings);
+    let s = Scanner::new(Scene::by_name(&scene).unwrap(), rig.clone(), Preset::Hard.laser(), settings).unwrap();
+    let mut poses = PoseTrack::default();
+    let mut t = -0.1;
+    while t <= s.duration_s() + 0.1 {
+        poses.push(s.settings.start_stamp_ns + (t * 1e9).round() as i64, &s.pose_at(t));
+        t += 0.01;
+    }
+    let tri = Triangulator::new(
+        rig.cameras[0].geometry().unwrap(),
+        &TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() },
+    )
+    .unwrap();
+    let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
+    let (mut line, mut prof) = (LaserLine::default(), Profile::default());
+    for f in 0..s.frame_count() {
+        let ft = s.frame_time(f);
+        det.detect(&s.render(0, f).view().unwrap(), &mut line).unwrap();
+        tri.triangulate(&line, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
+        for (i, p) in prof.points.iter().enumerate() {
+            if !p[0].is_finite() {
+                continue;
+            }
+            let e = s.scene.signed_distance(Vec3::new(p[0].into(), p[1].into(), p[2].into()));
+            if e.abs() > 0.005 {
+                eprintln!(
+                    "frame {f} row {i}: u {:.2} width {:.2} strength {:.0} point {:?} distance {:+.1} mm",
+                    line.u[i],
+                    line.width[i],
+                    line.strength[i],
+                    p,
+                    e * 1e3
+                );
+            }
+        }
+    }
 }

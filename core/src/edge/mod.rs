@@ -376,7 +376,7 @@ fn background<S: Sample>(p: &[S], m: usize, gap: usize, flank: usize) -> Option<
     if end - start < need || rend < rstart + need {
         return None;
     }
-    let (l, r) = (side(p, start, end), side(p, rstart, rend));
+    let (l, r) = (side(p, start, end, false), side(p, rstart, rend, true));
     let n = (l.count + r.count) as f32;
     Some(Flanks {
         left: (l.mean, l.centre),
@@ -395,10 +395,11 @@ struct Side {
 }
 
 /// The level of `p[start..end]`: its mean, or, where its two halves disagree by more than the
-/// quieter half's noise allows (another line, a highlight or an edge reaching into the flank), the
-/// darker half's.
+/// quieter half's noise allows (another line, a highlight or an edge reaching into the flank),
+/// the half nearer the peak (`near_first`: the first half is the nearer): the background right
+/// under the line.
 #[inline]
-fn side<S: Sample>(p: &[S], start: usize, end: usize) -> Side {
+fn side<S: Sample>(p: &[S], start: usize, end: usize, near_first: bool) -> Side {
     let k = end - start;
     let h = k / 2;
     let (a, b) = S::moments(p, start, start + h);
@@ -416,7 +417,7 @@ fn side<S: Sample>(p: &[S], start: usize, end: usize) -> Side {
     let sd = |s: &Side| (s.ss.max(0.0) / s.count as f32).sqrt();
     if (first.mean - second.mean).abs() <= HALF_AGREEMENT * sd(&first).min(sd(&second)) + 1.0 {
         Side { ss: first.ss + second.ss, ..whole(a + c, b + d, k, start) }
-    } else if first.mean < second.mean {
+    } else if near_first {
         first
     } else {
         second
@@ -499,11 +500,15 @@ fn find_peak<S: Sample>(
         return Err(run);
     }
     let saturated = peak >= saturation;
-    let cog = |p: &[S]| center_of_gravity(p, m, bg + cfg.peak_fraction * strength, max_hw);
+    // The centre's samples: above `peak_fraction` of the peak over the higher flank, so that on
+    // a step (a bright face on one side) the run does not spill into the face.
+    let high = f.left.0.max(f.right.0);
+    let level = (bg + cfg.peak_fraction * strength).max(high + cfg.peak_fraction * (peak - high));
+    let cog = |p: &[S]| center_of_gravity(p, m, level, max_hw);
     let mut fit = None;
     let pos = if !saturated && width < cfg.narrow_width_px {
         // The fit's run: above the centre-of-gravity level, and one sample more on each side.
-        let (a, b) = S::run(p, m, max_hw, S::cut(bg + cfg.peak_fraction * strength));
+        let (a, b) = S::run(p, m, max_hw, S::cut(level));
         let (a, b) = (a.saturating_sub(1), (b + 1).min(n - 1));
         fit = integrated_gaussian(p, (a, m, b), (f.left.1, f.left.0), (f.right.1, f.right.0));
         match fit {

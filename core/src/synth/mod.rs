@@ -37,7 +37,7 @@ impl LaserModel {
     /// about a third of a pixel wide before the optics blur it), bright enough to saturate on
     /// white surfaces.
     pub fn hard() -> Self {
-        Self { sheet_sigma_m: 0.0008, peak_level: 420.0, ..Self::default() }
+        Self { sheet_sigma_m: 0.0008, peak_level: 600.0, ..Self::default() }
     }
 }
 
@@ -81,11 +81,11 @@ impl Realism {
         Self {
             psf_sigma_px: 0.6,
             speckle_contrast: 0.25,
-            room_light_level: 80.0,
-            specular: 1.5,
+            room_light_level: 45.0,
+            specular: 2.5,
             shininess: 20.0,
             exposure_s: 0.008,
-            dark_albedo: Some(0.05),
+            dark_albedo: Some(0.08),
         }
     }
 }
@@ -429,33 +429,38 @@ impl Scanner {
                 });
             }
         });
-        // Pass 2: the light on each pixel, supersampled near the sheet (finer where its image is
-        // thin), the laser's share under speckle.
-        let sigma_eff = (self.laser.sheet_sigma_m.powi(2) + ctx.smear_m.powi(2) / 3.0).sqrt();
-        let band = 4.0 * sigma_eff + ctx.smear_m;
+        // Pass 2: the light on each pixel, supersampled near the sheet, the laser's share
+        // under speckle. The optics blur the room's light on the pixel grid, and the sheet's
+        // image before the pixels integrate it (a discrete blur of a line thinner than a pixel
+        // would keep it locked to its pixel): see `pixel_light`.
         let seed = self.settings.seed ^ ((cam as u64 + 1) << 48) ^ (frame_seed << 16);
-        let mut light = vec![[0.0f64; 3]; w * h];
+        let mut ambient = vec![[0.0f64; 3]; w * h];
+        let mut laser = vec![[0.0f64; 3]; w * h];
         std::thread::scope(|s| {
-            for (k, chunk) in light.chunks_mut(rows_per * w).enumerate() {
+            for (k, (amb, las)) in ambient.chunks_mut(rows_per * w).zip(laser.chunks_mut(rows_per * w)).enumerate() {
                 let (ctx, center) = (&ctx, &center);
                 s.spawn(move || {
                     let mut rng = SplitMix::new(seed ^ 0x5DEE_CE66 ^ (k as u64).wrapping_mul(0x9E37_79B9));
-                    for (i, out) in chunk.iter_mut().enumerate() {
+                    for (i, (a, l)) in amb.iter_mut().zip(las.iter_mut()).enumerate() {
                         let (x, y) = (i % w, k * rows_per + i / w);
-                        *out = self.pixel_light(ctx, c, center, (x, y), (band, sigma_eff), &mut rng);
+                        (*a, *l) = self.pixel_light(ctx, c, center, (x, y), &mut rng);
                     }
                 });
             }
         });
         if realism.psf_sigma_px > 0.0 {
-            blur(&mut light, w, h, realism.psf_sigma_px);
+            blur(&mut ambient, w, h, realism.psf_sigma_px);
         }
+        let light: Vec<[f64; 3]> =
+            ambient.iter().zip(&laser).map(|(a, l)| [a[0] + l[0], a[1] + l[1], a[2] + l[2]]).collect();
         // Pass 3: sensor noise and quantisation.
         let enc = self.settings.encoding;
         let bpp = enc.bytes_per_pixel();
         let mut img = Image::new(w as u32, h as u32, enc);
         std::thread::scope(|s| {
-            for (k, (chunk, light)) in img.data.chunks_mut(rows_per * w * bpp).zip(light.chunks(rows_per * w)).enumerate() {
+            for (k, (chunk, light)) in
+                img.data.chunks_mut(rows_per * w * bpp).zip(light.chunks(rows_per * w)).enumerate()
+            {
                 s.spawn(move || {
                     let mut rng = SplitMix::new(seed ^ (k as u64).wrapping_mul(0x9E37_79B9));
                     for (out, rgb) in chunk.chunks_mut(bpp).zip(light) {
@@ -467,60 +472,66 @@ impl Scanner {
         img
     }
 
-    /// The light on pixel `(x, y)`: the centre ray's, or near the sheet the mean of
-    /// sub-samples (at least `supersample` a side, more where the sheet's image is thinner
-    /// than a few sub-samples), with the laser's share under speckle.
+    /// The light on pixel `(x, y)`, as (everything else, the laser): the centre ray's, or near
+    /// the sheet the mean of sub-samples (at least `supersample` a side, more where the sheet's
+    /// image is thin), the laser's share under speckle. The optics' blur of the sheet is in its
+    /// profile: the sheet is widened by the point-spread function's width in metres across the
+    /// plane (from the plane distance's change from pixel to pixel), its energy kept.
     fn pixel_light(
         &self,
         ctx: &RenderCtx<'_>,
         c: &CamState,
         center: &[Shade],
         (x, y): (usize, usize),
-        (band, sigma): (f64, f64),
         rng: &mut SplitMix,
-    ) -> [f64; 3] {
+    ) -> ([f64; 3], [f64; 3]) {
         let (w, h) = (c.model.width as usize, c.model.height as usize);
-        let d0 = center[y * w + x].plane_dist;
+        let s0 = center[y * w + x];
+        if !ctx.laser_on {
+            return (s0.rgb, [0.0; 3]);
+        }
+        let d = |xx: usize, yy: usize| center[yy * w + xx].plane_dist;
+        let d0 = s0.plane_dist;
+        // The plane distance's change per pixel, from the smaller one-sided difference in each
+        // direction (so that a depth edge beside the pixel does not count).
+        let one_sided = |a: Option<f64>, b: Option<f64>| {
+            [a, b].into_iter().flatten().map(|v| (v - d0).abs()).filter(|v| v.is_finite()).fold(f64::INFINITY, f64::min)
+        };
+        let gx = one_sided(x.checked_sub(1).map(|xx| d(xx, y)), (x + 1 < w).then(|| d(x + 1, y)));
+        let gy = one_sided(y.checked_sub(1).map(|yy| d(x, yy)), (y + 1 < h).then(|| d(x, y + 1)));
+        let g = [gx, gy].into_iter().filter(|v| v.is_finite()).map(|v| v * v).sum::<f64>().sqrt();
+        let sigma = self.laser.sheet_sigma_m;
+        let sheet = (sigma * sigma + (self.settings.realism.psf_sigma_px * g).powi(2)).sqrt();
+        let sigma_eff = (sheet * sheet + ctx.smear_m.powi(2) / 3.0).sqrt();
+        let band = 4.0 * sigma_eff + ctx.smear_m;
         let mut near = false;
-        let mut slope = 0.0f64;
-        if ctx.laser_on {
-            for yy in y.saturating_sub(1)..(y + 2).min(h) {
-                for xx in x.saturating_sub(1)..(x + 2).min(w) {
-                    let d = center[yy * w + xx].plane_dist;
-                    near |= d.abs() < band || (d.is_finite() && d0.is_finite() && d.signum() != d0.signum());
-                    if d.is_finite() && d0.is_finite() {
-                        slope = slope.max((d - d0).abs());
-                    }
-                }
+        for yy in y.saturating_sub(1)..(y + 2).min(h) {
+            for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                let dv = d(xx, yy);
+                near |= dv.abs() < band || (dv.is_finite() && d0.is_finite() && dv.signum() != d0.signum());
             }
         }
-        let speckle = |rng: &mut SplitMix| {
-            let k = self.settings.realism.speckle_contrast;
-            if k > 0.0 {
-                (1.0 + k * rng.normal()).max(0.0)
-            } else {
-                1.0
-            }
-        };
         if !near {
-            let s = center[y * w + x];
-            return [0, 1, 2].map(|k| s.rgb[k] + s.laser[k]);
+            return (s0.rgb, s0.laser);
         }
         // Sub-samples a side: four across the sheet's standard deviation in the image.
-        let n = ((4.0 * slope / sigma).ceil() as usize).clamp(self.settings.supersample as usize, 16);
+        let n = ((4.0 * g / sigma_eff).ceil() as usize).clamp(self.settings.supersample as usize, 16);
         let (mut ambient, mut laser) = ([0.0; 3], [0.0; 3]);
         for sy in 0..n {
             for sx in 0..n {
                 let (u, v) = (x as f64 + (sx as f64 + 0.5) / n as f64, y as f64 + (sy as f64 + 0.5) / n as f64);
-                let s = ctx.shade(c.ray_at(w, u, v));
+                let s = ctx.shade_with(c.ray_at(w, u, v), sheet);
                 for k in 0..3 {
                     ambient[k] += s.rgb[k];
                     laser[k] += s.laser[k];
                 }
             }
         }
-        let f = speckle(rng) / (n * n) as f64;
-        [0, 1, 2].map(|k| ambient[k] / (n * n) as f64 + laser[k] * f)
+        let k = self.settings.realism.speckle_contrast;
+        let speckle = if k > 0.0 { (1.0 + k * rng.normal()).max(0.0) } else { 1.0 };
+        // The widened sheet keeps the laser's energy.
+        let f = speckle * sigma / sheet / (n * n) as f64;
+        (ambient.map(|a| a / (n * n) as f64), laser.map(|l| l * f))
     }
 
     /// The points on the laser sheet that camera `cam` can observe in frame `index`, in `table`:
@@ -617,6 +628,11 @@ struct RenderCtx<'a> {
 
 impl RenderCtx<'_> {
     fn shade(&self, ray_optical: Vec3) -> Shade {
+        self.shade_with(ray_optical, self.scanner.laser.sheet_sigma_m)
+    }
+
+    /// The shade with the sheet's standard deviation `sigma` (metres, peak 1 on its plane).
+    fn shade_with(&self, ray_optical: Vec3, sigma: f64) -> Shade {
         let s = self.scanner;
         let dir = self.rot.transform_vector(ray_optical);
         let Some(hit) = s.scene.intersect(self.origin, dir, 1e-6, 20.0) else { return Shade::default() };
@@ -638,7 +654,6 @@ impl RenderCtx<'_> {
             }
         }
         let mut laser = 0.0;
-        let sigma = s.laser.sheet_sigma_m;
         if self.laser_on && plane_dist.abs() < 6.0 * sigma + self.smear_m {
             let to_src = self.source - p;
             let cos_inc = hit.normal.dot(to_src) / to_src.norm();
@@ -652,7 +667,10 @@ impl RenderCtx<'_> {
             }
         }
         let (rgb, laser) = if s.settings.encoding.is_color() {
-            ([0, 1, 2].map(|k| diffuse * obj.color[k] + gloss), [0, 1, 2].map(|k| laser * s.laser.rgb[k] * obj.color[k]))
+            (
+                [0, 1, 2].map(|k| diffuse * obj.color[k] + gloss),
+                [0, 1, 2].map(|k| laser * s.laser.rgb[k] * obj.color[k]),
+            )
         } else {
             let lum = 0.299 * obj.color[0] + 0.587 * obj.color[1] + 0.114 * obj.color[2];
             ([diffuse * lum + gloss; 3], [laser * lum; 3])
