@@ -13,6 +13,10 @@ use xsurf_core::rig::Rig;
 use xsurf_core::synth::{Preset, ScanSettings, Scanner, Scene};
 use xsurf_core::triangulate::{Profile, Triangulator, TriangulatorConfig};
 
+/// The dark print's coverage is measured this far inside its edges, metres (about twice the
+/// sheet's width with its motion during the exposure).
+const BAND_EDGE_M: f64 = 0.004;
+
 /// One camera's reconstruction measured against the truth.
 #[derive(Debug)]
 struct Camera {
@@ -65,7 +69,10 @@ fn scan(scene: &str, (w, h): (u32, u32), encoding: Encoding, speed: f64, method:
         let mut table: Vec<f64> =
             pts.iter().filter(|p| sc.on_bare_table(v(p), 0.01)).map(|p| f64::from(p[2])).collect();
         table.sort_by(f64::total_cmp);
-        let band: Vec<Vec3> = truth.iter().copied().filter(|p| sc.in_band(*p)).collect();
+        // The dark print away from its edges: where the sheet straddles a dark/bright edge, the
+        // line on the dark side is dimmer than the bright side's own light, no peak at all in a
+        // grey image (those points count in the coverage above, not here).
+        let band: Vec<Vec3> = truth.iter().copied().filter(|p| sc.in_band(*p, BAND_EDGE_M)).collect();
         let cov = coverage(&truth, &pts, 0.003);
         let mesh = mesh_grid(&grid, &MeshConfig::default());
         let c = Camera {
@@ -302,6 +309,57 @@ fn probe_outliers() {
                     e * 1e3
                 );
             }
+        }
+    }
+}
+
+/// Debug aid: the rows of one frame whose true line lies on a dark band.
+#[test]
+#[ignore]
+fn probe_band() {
+    let scene = std::env::var("SCENE").unwrap_or("phantom".into());
+    let frames: Vec<u32> = std::env::var("F").map_or((0..400).collect(), |v| vec![v.parse().unwrap()]);
+    let rig = Rig::study(320, 240);
+    let mut settings = ScanSettings::default();
+    Preset::Hard.apply(&mut settings);
+    let s = Scanner::new(Scene::by_name(&scene).unwrap(), rig.clone(), Preset::Hard.laser(), settings).unwrap();
+    let cam = &rig.cameras[0];
+    let model = cam.model().unwrap();
+    for f in frames.into_iter().filter(|&f| f < s.frame_count()) {
+        let ft = s.frame_time(f);
+        let pose = xsurf_core::pose::table_from_carm(ft.travel_m, 0.0, 0.0).compose(&cam.carm_from_optical()).inverse();
+        let band_here = s.observable_points(0, f, 1.0).into_iter().any(|p| s.scene.in_band(p, BAND_EDGE_M));
+        if !band_here {
+            continue;
+        }
+        let img = s.render(0, f);
+        let mut line = LaserLine::default();
+        EdgeDetector::new(EdgeConfig::default()).unwrap().detect(&img.view().unwrap(), &mut line).unwrap();
+        let raw = {
+            let mut l = LaserLine::default();
+            EdgeDetector::new(EdgeConfig { min_run: 1, ..Default::default() })
+                .unwrap()
+                .detect(&img.view().unwrap(), &mut l)
+                .unwrap();
+            l
+        };
+        let mut seen = std::collections::BTreeSet::new();
+        for p in s.observable_points(0, f, 1.0) {
+            if !s.scene.in_band(p, BAND_EDGE_M) {
+                continue;
+            }
+            let Some((u, v)) = model.project(pose.transform_point(p)) else { continue };
+            let r = v.round() as usize;
+            if !seen.insert(r) {
+                continue;
+            }
+            let c = u.round() as usize;
+            eprintln!(
+                "frame {f} row {r}: true {u:.2} found {:.2} raw {:.2} {:?}",
+                line.u[r],
+                raw.u[r],
+                &img.data[r * 320 + c - 8..r * 320 + c + 9]
+            );
         }
     }
 }

@@ -17,6 +17,9 @@ pub(super) trait Sample: Copy + PartialOrd {
     fn weighted(s: &[Self]) -> (f64, f64);
     /// Index of the first maximum of `p` (`None` if empty).
     fn argmax(p: &[Self]) -> Option<usize>;
+    /// The peak contrast of every sample: how far it stands above the higher of the samples
+    /// `d` before and after it (zero within `d` of either end, and never negative), into `out`.
+    fn contrast(p: &[Self], d: usize, out: &mut Vec<Self>);
     /// The run of samples above `cut` on either side of `m`, at most `reach` samples each way
     /// and inside `p`: `(first, last)`. `p[m]` itself is not compared.
     #[inline(always)]
@@ -56,6 +59,17 @@ fn masked_moments16(w: &[u8], mask: &[u8]) -> Option<(f32, f32)> {
 }
 
 impl Sample for u8 {
+    #[inline]
+    fn contrast(p: &[u8], d: usize, out: &mut Vec<u8>) {
+        out.clear();
+        out.resize(p.len(), 0);
+        if p.len() > 2 * d {
+            let (a, mid, b) = (&p[..p.len() - 2 * d], &p[d..p.len() - d], &p[2 * d..]);
+            for (((o, &v), &l), &r) in out[d..p.len() - d].iter_mut().zip(mid).zip(a).zip(b) {
+                *o = v.saturating_sub(l.max(r));
+            }
+        }
+    }
     type Cut = i32;
     #[inline(always)]
     fn f(self) -> f32 {
@@ -168,6 +182,13 @@ fn above16(w: [u8; 16], floor: u8x16) -> u32 {
     v.max(floor).simd_eq(v).to_bitmask()
 }
 impl Sample for f32 {
+    fn contrast(p: &[f32], d: usize, out: &mut Vec<f32>) {
+        out.clear();
+        out.resize(p.len(), 0.0);
+        for i in d..p.len().saturating_sub(d) {
+            out[i] = (p[i] - p[i - d].max(p[i + d])).max(0.0);
+        }
+    }
     type Cut = f32;
     #[inline(always)]
     fn f(self) -> f32 {

@@ -376,7 +376,7 @@ fn background<S: Sample>(p: &[S], m: usize, gap: usize, flank: usize) -> Option<
     if end - start < need || rend < rstart + need {
         return None;
     }
-    let (l, r) = (side(p, start, end, false), side(p, rstart, rend, true));
+    let (l, r) = (side(p, start, end), side(p, rstart, rend));
     let n = (l.count + r.count) as f32;
     Some(Flanks {
         left: (l.mean, l.centre),
@@ -396,10 +396,9 @@ struct Side {
 
 /// The level of `p[start..end]`: its mean, or, where its two halves disagree by more than the
 /// quieter half's noise allows (another line, a highlight or an edge reaching into the flank),
-/// the half nearer the peak (`near_first`: the first half is the nearer): the background right
-/// under the line.
+/// the darker half's.
 #[inline]
-fn side<S: Sample>(p: &[S], start: usize, end: usize, near_first: bool) -> Side {
+fn side<S: Sample>(p: &[S], start: usize, end: usize) -> Side {
     let k = end - start;
     let h = k / 2;
     let (a, b) = S::moments(p, start, start + h);
@@ -410,14 +409,14 @@ fn side<S: Sample>(p: &[S], start: usize, end: usize, near_first: bool) -> Side 
         ss: b - a * a / k as f32,
         count: k,
     };
-    if h < 2 {
+    if h < 2 || k - h < 2 {
         return whole(a + c, b + d, k, start);
     }
     let (first, second) = (whole(a, b, h, start), whole(c, d, k - h, start + h));
     let sd = |s: &Side| (s.ss.max(0.0) / s.count as f32).sqrt();
     if (first.mean - second.mean).abs() <= HALF_AGREEMENT * sd(&first).min(sd(&second)) + 1.0 {
         Side { ss: first.ss + second.ss, ..whole(a + c, b + d, k, start) }
-    } else if near_first {
+    } else if first.mean < second.mean {
         first
     } else {
         second
@@ -468,9 +467,18 @@ fn find_peak<S: Sample>(
     // One sample further than a line may reach, so that a line too wide shows as such.
     let (lo, hi) = S::run(p, m, max_hw + 1, half0);
     let run = (lo.saturating_sub(1), hi + 1);
-    let gap = (2 * (m - lo).max(hi - m) + 2).min(max_hw);
-    // A narrower line keeps the first flanks (they are clear of it, only a little further out).
-    let gap = gap.max(gap0);
+    // The flanks just clear the line: twice its half-width and two more samples out, and for a
+    // line a pixel or two wide, GAP_PER_WIDTH times its width (at half the first pass's
+    // height), right beside it (a dim line in a narrow dark stripe has its background within a
+    // few pixels).
+    let w0 = if lo > 0 && hi + 1 < p.len() {
+        let level = f0.mean + 0.5 * (peak - f0.mean);
+        crossing(p, hi + 1, hi, level) - crossing(p, lo - 1, lo, level)
+    } else {
+        (hi - lo + 1) as f32
+    };
+    let hw = (m - lo).max(hi - m);
+    let gap = if hw >= 2 { 2 * hw + 2 } else { (GAP_PER_WIDTH * w0).ceil() as usize }.clamp(1, max_hw);
     let f = match if gap == gap0 { Some(f0) } else { background(p, m, gap, flank) } {
         Some(f) => f,
         None => return Err(run),
@@ -501,9 +509,11 @@ fn find_peak<S: Sample>(
     }
     let saturated = peak >= saturation;
     // The centre's samples: above `peak_fraction` of the peak over the higher flank, so that on
-    // a step (a bright face on one side) the run does not spill into the face.
+    // a step (a bright face on one side) the run does not spill into the face; at most half the
+    // peak over the background, so that the run is never empty.
     let high = f.left.0.max(f.right.0);
-    let level = (bg + cfg.peak_fraction * strength).max(high + cfg.peak_fraction * (peak - high));
+    let level =
+        (bg + cfg.peak_fraction * strength).max(high + cfg.peak_fraction * (peak - high)).min(bg + 0.5 * strength);
     let cog = |p: &[S]| center_of_gravity(p, m, level, max_hw);
     let mut fit = None;
     let pos = if !saturated && width < cfg.narrow_width_px {
@@ -568,7 +578,7 @@ pub struct DetectStats {
 #[derive(Debug, Default, Clone)]
 pub struct EdgeDetector {
     config: EdgeConfig,
-    profile: Vec<f32>,
+    scratch: Scratch,
     /// Per sample: saturated, and a narrow line's fit.
     state: Vec<(bool, Option<Fit>)>,
     /// The narrow line's sigma (pixels) as last measured, for the samples of a frame that
@@ -593,14 +603,14 @@ impl Search<'_, '_> {
     /// The line in sample `s`: the strongest peak that passes every test (up to
     /// `max_candidates` tried), or with `near = (centre, radius)` the strongest within `radius`
     /// of `centre` (absolute position across). Position is absolute.
-    fn sample(&self, s: u32, near: Option<(f32, f32)>, buf: &mut Vec<f32>) -> Option<Peak> {
+    fn sample(&self, s: u32, near: Option<(f32, f32)>, buf: &mut Scratch) -> Option<Peak> {
         let enc = self.image.encoding();
         let (x0, x1) = (self.inner.start as usize, self.inner.end as usize);
         let peak = if self.vertical && enc == Encoding::Mono8 {
-            self.locate(&self.image.row(s)[x0..x1], near)
+            self.locate(&self.image.row(s)[x0..x1], near, &mut buf.contrast_u8)
         } else {
-            fill_profile(self.image, s, self.inner.clone(), self.vertical, self.cfg.channel, buf);
-            self.locate(&buf[..], near)
+            fill_profile(self.image, s, self.inner.clone(), self.vertical, self.cfg.channel, &mut buf.profile);
+            self.locate(&buf.profile[..], near, &mut buf.contrast_f32)
         }?;
         let shift = |f| match f {
             Fit::Centre { centre, sigma } => Fit::Centre { centre: centre + x0 as f32, sigma },
@@ -609,7 +619,7 @@ impl Search<'_, '_> {
         Some(Peak { pos: peak.pos + x0 as f32, fit: peak.fit.map(shift), ..peak })
     }
 
-    fn locate<S: Sample>(&self, p: &[S], near: Option<(f32, f32)>) -> Option<Peak> {
+    fn locate<S: Sample>(&self, p: &[S], near: Option<(f32, f32)>, contrast: &mut Vec<S>) -> Option<Peak> {
         let cfg = self.cfg;
         if cfg.method == Method::Gradient {
             return gradient_edge(p, cfg.gradient_threshold * self.scale);
@@ -621,10 +631,18 @@ impl Search<'_, '_> {
             let peak = find_peak(p, m, cfg, self.scale, self.saturation).ok()?;
             return ((peak.pos + off - c).abs() <= r).then_some(peak);
         }
-        // Strongest first; a refused peak's run is left out of the next search.
+        // Brightest first, then the sample of the highest peak contrast (a dim line in a dark
+        // region beside brighter surfaces is not the row's brightest), then the brightest
+        // again; a refused peak's run is left out of the next search.
         let mut refused: [(usize, usize); 16] = [(0, 0); 16];
         for k in 0..cfg.max_candidates as usize {
-            let m = argmax_outside(p, &refused[..k])?;
+            let m = if k == 1 {
+                S::contrast(p, CONTRAST_OFFSET, contrast);
+                argmax_outside(contrast, &refused[..k]).filter(|&m| contrast[m].f() > 0.0)
+            } else {
+                argmax_outside(p, &refused[..k])
+            };
+            let Some(m) = m else { continue };
             match find_peak(p, m, cfg, self.scale, self.saturation) {
                 Ok(peak) => return Some(peak),
                 Err(run) => {
@@ -635,6 +653,23 @@ impl Search<'_, '_> {
         }
         None
     }
+}
+
+/// The background flanks start this many line widths (FWHM) from the peak.
+const GAP_PER_WIDTH: f32 = 1.2;
+
+/// How far either side of a sample its peak contrast looks, pixels.
+const CONTRAST_OFFSET: usize = 3;
+
+/// The detector's per-row scratch buffers.
+#[derive(Debug, Default, Clone)]
+struct Scratch {
+    /// A row or column of the signal, as floats.
+    profile: Vec<f32>,
+    /// Peak contrast of a byte row.
+    contrast_u8: Vec<u8>,
+    /// Peak contrast of a float profile.
+    contrast_f32: Vec<f32>,
 }
 
 /// The first maximum of `p` outside the sorted, possibly overlapping closed ranges `skip`.
@@ -711,11 +746,11 @@ impl EdgeDetector {
         };
         for s in search.outer.clone() {
             stats.searched += 1;
-            let peak = search.sample(s, None, &mut self.profile);
+            let peak = search.sample(s, None, &mut self.scratch);
             put(out, &mut self.state, s, peak);
         }
         if cfg.method != Method::Gradient {
-            let profile = &mut self.profile;
+            let profile = &mut self.scratch;
             let state = &mut self.state;
             track::extend(out, cfg, search.outer.clone(), |out, s, near| {
                 let peak = search.sample(s, Some(near), profile);

@@ -113,13 +113,18 @@ fn extrapolate(line: &LaserLine, end: u32, forward: bool, step: u32, max_jump_px
 /// (a highlight or a blob of texture is about as long as it is wide).
 const MIN_LENGTH_PER_WIDTH: f32 = 2.0;
 
-/// Clears every run shorter than `min_run`, or than `MIN_LENGTH_PER_WIDTH` times its mean width;
-/// returns the samples cleared.
+/// Runs shorter than this many times `min_run` are judged by their shape as well.
+const BLOB_RUNS: u32 = 4;
+
+/// Clears every run shorter than `min_run`, and every short run (under `BLOB_RUNS` times
+/// `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean width; returns the samples
+/// cleared.
 pub(super) fn drop_short_runs(line: &mut LaserLine, cfg: &EdgeConfig, range: Range<u32>) -> u32 {
     let mut dropped = 0;
     for r in runs(line, range, cfg.max_jump_px) {
         let width: f32 = (r.first..=r.last).map(|s| line.width[s as usize]).sum::<f32>() / r.count as f32;
-        if r.count >= cfg.min_run && r.count as f32 >= MIN_LENGTH_PER_WIDTH * width {
+        let blob = r.count < BLOB_RUNS * cfg.min_run && (r.count as f32) < MIN_LENGTH_PER_WIDTH * width;
+        if r.count >= cfg.min_run && !blob {
             continue;
         }
         for s in r.first..=r.last {

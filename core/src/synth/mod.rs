@@ -37,7 +37,7 @@ impl LaserModel {
     /// about a third of a pixel wide before the optics blur it), bright enough to saturate on
     /// white surfaces.
     pub fn hard() -> Self {
-        Self { sheet_sigma_m: 0.0008, peak_level: 600.0, ..Self::default() }
+        Self { sheet_sigma_m: 0.0008, peak_level: 700.0, ..Self::default() }
     }
 }
 
@@ -85,7 +85,7 @@ impl Realism {
             specular: 2.5,
             shininess: 20.0,
             exposure_s: 0.008,
-            dark_albedo: Some(0.08),
+            dark_albedo: Some(0.15),
         }
     }
 }
@@ -97,7 +97,7 @@ impl Default for Realism {
 }
 
 /// A named set of scanner settings: `ideal` (today's render) or `hard` (every effect of
-/// [`Realism::hard`], a thin saturating sheet, noisier sensor, more laser-off frames).
+/// [`Realism::hard`], a thin saturating sheet, more laser-off frames).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Preset {
     /// The ideal render.
@@ -128,7 +128,6 @@ impl Preset {
     pub fn apply(self, settings: &mut ScanSettings) {
         if self == Preset::Hard {
             settings.realism = Realism::hard();
-            settings.noise_sigma = 2.0;
             settings.laser_off_frames = 4;
         }
     }

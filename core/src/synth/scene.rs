@@ -261,12 +261,12 @@ impl Scene {
         self
     }
 
-    /// True if `p` (on the surface, within 1 mm) lies on a printed band.
-    pub fn in_band(&self, p: Vec3) -> bool {
-        self.objects
-            .iter()
-            .filter(|o| !o.internal)
-            .any(|o| o.band.is_some_and(|b| p.y >= b.y_min && p.y <= b.y_max) && sdf(&o.shape, p).abs() < 1e-3)
+    /// True if `p` (on the surface, within 1 mm) lies on a printed band, at least `margin`
+    /// metres inside its edges.
+    pub fn in_band(&self, p: Vec3, margin: f64) -> bool {
+        self.objects.iter().filter(|o| !o.internal).any(|o| {
+            o.band.is_some_and(|b| p.y >= b.y_min + margin && p.y <= b.y_max - margin) && sdf(&o.shape, p).abs() < 1e-3
+        })
     }
 
     /// True if the surface nearest `p` is the tabletop, at least `margin` metres from every
