@@ -15,7 +15,8 @@ fn main() {
     preset.apply(&mut settings);
     let s = Scanner::new(Scene::by_name(&a[0]).unwrap(), Rig::study(w, h), preset.laser(), settings).unwrap();
     let f: u32 = a[4].parse().unwrap();
-    let img = s.render(0, f.min(s.frame_count() - 1));
+    let cam: usize = std::env::var("CAM").map_or(0, |v| v.parse().unwrap());
+    let img = s.render(cam, f.min(s.frame_count() - 1));
     let head = if encoding == Encoding::Rgb8 { format!("P6\n{w} {h}\n255\n") } else { format!("P5\n{w} {h}\n255\n") };
     let mut bytes = head.into_bytes();
     bytes.extend_from_slice(&img.data);

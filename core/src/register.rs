@@ -156,6 +156,17 @@ pub struct RefineConfig {
     /// Points of one frame must lie on laser planes no further apart in travel than this,
     /// metres (see [`grid_observations`]).
     pub max_travel_spread_m: f64,
+    /// A correction is applied only where the data constrain it: it must be at least this many
+    /// of its standard deviations (from the normal equations, along the correction), so that
+    /// the uncertainty is well below the correction.
+    pub min_significance: f64,
+    /// ... and the RMS residual must fall by at least this fraction of what it was. A correct
+    /// calibration's residual is the surfaces' own noise, which no placement lowers much.
+    pub min_rms_reduction: f64,
+    /// Correspondences per independent measurement in the covariance: the grids' smoothing
+    /// and the line detector spread one measurement's error over neighbouring samples, so the
+    /// normal equations' own count overstates what is known.
+    pub points_per_measurement: f64,
 }
 
 impl Default for RefineConfig {
@@ -173,6 +184,9 @@ impl Default for RefineConfig {
             max_rms_m: 0.001,
             smooth_iterations: 6,
             max_travel_spread_m: 0.001,
+            min_significance: 5.0,
+            min_rms_reduction: 0.25,
+            points_per_measurement: 50.0,
         }
     }
 }
@@ -196,6 +210,12 @@ pub struct RefineReport {
     pub overlap_fraction: f64,
     /// Observations used.
     pub points: usize,
+    /// Standard deviations of the whole correction (its Mahalanobis norm).
+    pub significance: f64,
+    /// One standard deviation of the position correction alone (normal equations), metres.
+    pub sigma_translation_m: f64,
+    /// One standard deviation of the orientation correction, degrees.
+    pub sigma_rotation_deg: f64,
 }
 
 /// Why the calibrated placement stands.
@@ -240,6 +260,33 @@ pub enum RefineError {
     /// The geometry does not constrain the placement (a flat or featureless overlap).
     #[error("the overlap does not constrain the camera's placement (singular normal equations)")]
     Degenerate,
+    /// The correction is within what the data can tell, or it hardly improves the fit: the
+    /// calibration stands.
+    #[error(
+        "correction not supported by the data: {translation_m:.5} m / {rotation_deg:.4} deg is {significance:.1} \
+         standard deviations (need {min_significance}; 1-sigma {sigma_translation_m:.5} m / {sigma_rotation_deg:.4} \
+         deg alone), RMS residual {rms_before_m:.5} -> {rms_after_m:.5} m (need a {min_rms_reduction} reduction)"
+    )]
+    NotSignificant {
+        /// Size of the position correction, metres.
+        translation_m: f64,
+        /// Angle of the orientation correction, degrees.
+        rotation_deg: f64,
+        /// Standard deviations of the whole correction (Mahalanobis norm).
+        significance: f64,
+        /// Its 1-sigma uncertainty alone, metres.
+        sigma_translation_m: f64,
+        /// Its 1-sigma uncertainty alone, degrees.
+        sigma_rotation_deg: f64,
+        /// RMS residual before, metres.
+        rms_before_m: f64,
+        /// RMS residual after, metres.
+        rms_after_m: f64,
+        /// Significance needed.
+        min_significance: f64,
+        /// Fraction of reduction needed.
+        min_rms_reduction: f64,
+    },
     /// The points of one frame lie on laser planes of different travels.
     #[error("frame {frame}: its points lie on laser planes {spread_m:.5} m of travel apart (limit {max_spread_m} m): the C-arm turned or the tabletop moved during the scan")]
     NotOneTravel {
@@ -384,6 +431,21 @@ pub fn refine_camera(
         m
     };
     let rms = |m: &[(usize, usize, f64)]| (m.iter().map(|x| x.2 * x.2).sum::<f64>() / m.len().max(1) as f64).sqrt();
+    // Gauss-Newton's normal equations at a placement, Huber-weighted.
+    let normal_equations = |m: &[(usize, usize, f64)], e: &Iso3| {
+        let (mut ata, mut atb) = ([[0.0; 6]; 6], [0.0; 6]);
+        for &(i, j, r) in m {
+            let Some(jac) = obs[i].jacobian(e, plane, reference.normals[j]) else { continue };
+            let w = if r.abs() <= cfg.huber_m { 1.0 } else { cfg.huber_m / r.abs() };
+            for a in 0..6 {
+                for b in 0..6 {
+                    ata[a][b] += w * jac[a] * jac[b];
+                }
+                atb[a] -= w * jac[a] * r;
+            }
+        }
+        (ata, atb)
+    };
     let first = matches(carm_from_optical);
     let fraction = first.len() as f64 / obs.len().max(1) as f64;
     if first.len() < cfg.min_overlap_points || fraction < cfg.min_overlap_fraction {
@@ -404,17 +466,7 @@ pub fn refine_camera(
         if m.len() < cfg.min_overlap_points {
             break;
         }
-        let (mut ata, mut atb) = ([[0.0; 6]; 6], [0.0; 6]);
-        for (i, j, r) in trimmed(m) {
-            let Some(jac) = obs[i].jacobian(&e, plane, reference.normals[j]) else { continue };
-            let w = if r.abs() <= cfg.huber_m { 1.0 } else { cfg.huber_m / r.abs() };
-            for a in 0..6 {
-                for b in 0..6 {
-                    ata[a][b] += w * jac[a] * jac[b];
-                }
-                atb[a] -= w * jac[a] * r;
-            }
-        }
+        let (ata, atb) = normal_equations(&trimmed(m), &e);
         let x = solve6(ata, atb).ok_or(RefineError::Degenerate)?;
         e = corrected(&e, &x);
         // Converged when a step moves no ray by more than a micrometre at a metre.
@@ -422,10 +474,23 @@ pub fn refine_camera(
             break;
         }
     }
-    let last = matches(&e);
-    let overlap_fraction = last.len() as f64 / obs.len().max(1) as f64;
-    let overlap = last.len();
-    let rms_after = rms(&trimmed(last));
+    let all = matches(&e);
+    let overlap_fraction = all.len() as f64 / obs.len().max(1) as f64;
+    let overlap = all.len();
+    let last = trimmed(all);
+    let rms_after = rms(&last);
+    // The correction's uncertainty: sigma^2 (J^T W J)^-1 at the result, the residual variance
+    // counted per independent measurement.
+    let (ata, _) = normal_equations(&last, &e);
+    let s2 = rms_after * rms_after * cfg.points_per_measurement;
+    let column = |k: usize| {
+        let mut unit = [0.0; 6];
+        unit[k] = 1.0;
+        solve6(ata, unit).map(|c| c[k] * s2)
+    };
+    let var: Vec<f64> = (0..6).map(column).collect::<Option<_>>().ok_or(RefineError::Degenerate)?;
+    let sigma_rotation_deg = (var[0] + var[1] + var[2]).max(0.0).sqrt().to_degrees();
+    let sigma_translation_m = (var[3] + var[4] + var[5]).max(0.0).sqrt();
     let translation_m = e.translation - carm_from_optical.translation;
     let rotation_deg = rotation_angle_deg(&carm_from_optical.rotation, &e.rotation);
     if translation_m.norm() > cfg.max_translation_m || rotation_deg > cfg.max_rotation_deg {
@@ -439,6 +504,32 @@ pub fn refine_camera(
     if !(rms_after <= cfg.max_rms_m) || overlap < cfg.min_overlap_points {
         return Err(RefineError::PoorFit { rms_m: rms_after, iterations, max_rms_m: cfg.max_rms_m });
     }
+    // How many standard deviations the whole correction is, along its own direction in the
+    // six parameters (the Mahalanobis norm): a shift and a turn that the data only constrain
+    // together are judged together.
+    let q = e.rotation.mul_mat(&carm_from_optical.rotation.transpose()).to_quat();
+    let q = if q.w < 0.0 { Quat { x: -q.x, y: -q.y, z: -q.z, w: -q.w } } else { q };
+    let v = Vec3::new(q.x, q.y, q.z);
+    let angle = 2.0 * v.norm().atan2(q.w);
+    let w = v.try_normalize().map_or(Vec3::ZERO, |a| a * angle);
+    let x = [w.x, w.y, w.z, translation_m.x, translation_m.y, translation_m.z];
+    let d2: f64 = (0..6).map(|a| (0..6).map(|b| x[a] * ata[a][b] * x[b]).sum::<f64>()).sum::<f64>() / s2.max(1e-30);
+    let significance = d2.max(0.0).sqrt();
+    let significant = significance >= cfg.min_significance;
+    let reduced = rms_after <= (1.0 - cfg.min_rms_reduction) * rms_before;
+    if !(significant && reduced) {
+        return Err(RefineError::NotSignificant {
+            translation_m: translation_m.norm(),
+            rotation_deg,
+            significance,
+            sigma_translation_m,
+            sigma_rotation_deg,
+            rms_before_m: rms_before,
+            rms_after_m: rms_after,
+            min_significance: cfg.min_significance,
+            min_rms_reduction: cfg.min_rms_reduction,
+        });
+    }
     Ok(RefineReport {
         carm_from_optical: e,
         translation_m,
@@ -448,6 +539,9 @@ pub fn refine_camera(
         rms_after_m: rms_after,
         overlap_fraction,
         points: obs.len(),
+        significance,
+        sigma_translation_m,
+        sigma_rotation_deg,
     })
 }
 

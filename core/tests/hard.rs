@@ -283,8 +283,9 @@ fn probe_outliers() {
         poses.push(s.settings.start_stamp_ns + (t * 1e9).round() as i64, &s.pose_at(t));
         t += 0.01;
     }
+    let cam: usize = std::env::var("CAM").map_or(0, |v| v.parse().unwrap());
     let tri = Triangulator::new(
-        rig.cameras[0].geometry().unwrap(),
+        rig.cameras[cam].geometry().unwrap(),
         &TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() },
     )
     .unwrap();
@@ -292,7 +293,7 @@ fn probe_outliers() {
     let (mut line, mut prof) = (LaserLine::default(), Profile::default());
     for f in 0..s.frame_count() {
         let ft = s.frame_time(f);
-        det.detect(&s.render(0, f).view().unwrap(), &mut line).unwrap();
+        det.detect(&s.render(cam, f).view().unwrap(), &mut line).unwrap();
         tri.triangulate(&line, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
         for (i, p) in prof.points.iter().enumerate() {
             if !p[0].is_finite() {

@@ -584,6 +584,10 @@ pub struct EdgeDetector {
     /// The narrow line's sigma (pixels) as last measured, for the samples of a frame that
     /// measures none.
     sigma_px: Option<f32>,
+    /// The line's typical width (median FWHM, pixels) in the last frame that had a line.
+    width_px: Option<f32>,
+    /// Scratch for that median.
+    widths: Vec<f32>,
 }
 
 /// Where one detection searches: the image, its region and its signal.
@@ -657,6 +661,9 @@ impl Search<'_, '_> {
 
 /// The background flanks start this many line widths (FWHM) from the peak.
 const GAP_PER_WIDTH: f32 = 1.2;
+
+/// A frame's line sets the typical width when it has at least this many samples.
+const TYPICAL_WIDTH_SAMPLES: usize = 20;
 
 /// How far either side of a sample its peak contrast looks, pixels.
 const CONTRAST_OFFSET: usize = 3;
@@ -758,7 +765,10 @@ impl EdgeDetector {
                 put(out, state, s, peak);
                 found
             });
-            stats.short_runs = track::drop_short_runs(out, cfg, search.outer.clone());
+            stats.short_runs = track::drop_short_runs(out, cfg, search.outer.clone(), self.width_px);
+            if let Some(w) = track::typical_width(out, TYPICAL_WIDTH_SAMPLES, &mut self.widths) {
+                self.width_px = Some(w);
+            }
         }
         resolve_one_edge_fits(&self.state, &mut self.sigma_px, out);
         for s in search.outer.clone() {

@@ -113,18 +113,46 @@ fn extrapolate(line: &LaserLine, end: u32, forward: bool, step: u32, max_jump_px
 /// (a highlight or a blob of texture is about as long as it is wide).
 const MIN_LENGTH_PER_WIDTH: f32 = 2.0;
 
+/// Runs shorter than this many times `min_run` are compared with the line's typical width.
+const WIDE_RUNS: u32 = 10;
+/// A run this many times wider than the line's typical width is not the line.
+const WIDTH_TOLERANCE: f32 = 2.5;
+
+/// The typical width of the line in `line` (the median of its samples' widths), if it has at
+/// least `min` samples.
+pub(super) fn typical_width(line: &LaserLine, min: usize, scratch: &mut Vec<f32>) -> Option<f32> {
+    scratch.clear();
+    scratch.extend(line.width.iter().copied().filter(|w| *w > 0.0));
+    if scratch.len() < min {
+        return None;
+    }
+    let mid = scratch.len() / 2;
+    Some(*scratch.select_nth_unstable_by(mid, f32::total_cmp).1)
+}
+
 /// Runs shorter than this many times `min_run` are judged by their shape as well.
 const BLOB_RUNS: u32 = 4;
 
 /// Clears every run shorter than `min_run`, and every short run (under `BLOB_RUNS` times
 /// `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean width; returns the samples
 /// cleared.
-pub(super) fn drop_short_runs(line: &mut LaserLine, cfg: &EdgeConfig, range: Range<u32>) -> u32 {
+///
+/// With the line's typical width from earlier frames (`typical_width_px`), a run under
+/// `WIDE_RUNS` times `min_run` and more than `WIDTH_TOLERANCE` times as wide is dropped too: a
+/// highlight, or a bright mark, in a frame after the laser went off.
+pub(super) fn drop_short_runs(
+    line: &mut LaserLine,
+    cfg: &EdgeConfig,
+    range: Range<u32>,
+    typical_width_px: Option<f32>,
+) -> u32 {
     let mut dropped = 0;
     for r in runs(line, range, cfg.max_jump_px) {
         let width: f32 = (r.first..=r.last).map(|s| line.width[s as usize]).sum::<f32>() / r.count as f32;
         let blob = r.count < BLOB_RUNS * cfg.min_run && (r.count as f32) < MIN_LENGTH_PER_WIDTH * width;
-        if r.count >= cfg.min_run && !blob {
+        let too_wide =
+            r.count < WIDE_RUNS * cfg.min_run && typical_width_px.is_some_and(|t| width > WIDTH_TOLERANCE * t);
+        if r.count >= cfg.min_run && !blob && !too_wide {
             continue;
         }
         for s in r.first..=r.last {

@@ -412,6 +412,12 @@ impl MergerNode {
                         "correction_m": [t.x, t.y, t.z], "correction_deg": r.rotation_deg,
                         "iterations": r.iterations, "rms_before_m": r.rms_before_m, "rms_after_m": r.rms_after_m,
                         "overlap_fraction": r.overlap_fraction, "points": r.points,
+                        "significance_sigma": r.significance, "sigma_translation_m": r.sigma_translation_m,
+                        "sigma_rotation_deg": r.sigma_rotation_deg,
+                        "reason": format!(
+                            "the correction is {:.0} standard deviations and lowers the RMS residual from {:.5} to {:.5} m",
+                            r.significance, r.rms_before_m, r.rms_after_m
+                        ),
                     }));
                 }
                 Err(err) => records.extend(refuse(std::slice::from_ref(name), Some(&e), err.to_string())),
@@ -500,10 +506,11 @@ fn placement_json(e: &Iso3) -> serde_json::Value {
 
 fn log_refinement(scan: u32, name: &str, reference: &str, r: &RefineReport) {
     log::info!(
-        "merger: scan {scan}: {name} refined against {reference}: moved {:.2} mm / {:.3} deg, {} iterations, \
-         RMS {:.3} -> {:.3} mm over {} points, overlap {:.0} %",
+        "merger: scan {scan}: {name} refined against {reference}: moved {:.2} mm / {:.3} deg ({:.0} standard \
+         deviations), {} iterations, RMS {:.3} -> {:.3} mm over {} points, overlap {:.0} %",
         r.translation_m.norm() * 1e3,
         r.rotation_deg,
+        r.significance,
         r.iterations,
         r.rms_before_m * 1e3,
         r.rms_after_m * 1e3,
