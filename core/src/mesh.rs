@@ -3,7 +3,10 @@
 //! Triangles are made only between grid neighbours, so the mesh grows with the scan and never
 //! bridges a deliberate hole. A triangle is kept when every edge passes the length limit
 //! (`max_edge_m + max_edge_per_m * range`, the depth-dependent term of PCL's OrganizedFastMesh)
-//! and its smallest angle reaches `min_angle_deg` (the study's 12 degrees).
+//! and its smallest angle reaches `min_angle_deg` (the study's 12 degrees). On a grid whose
+//! frames lie well apart compared with its samples (a fast scan: 4.7 mm between frames and a
+//! millimetre between samples), the angles are judged with the frame spacing scaled to the
+//! sample spacing, so that the grid's own aspect is not taken for slivers.
 
 use crate::triangulate::Profile;
 use serde::{Deserialize, Serialize};
@@ -430,6 +433,62 @@ fn grey_from_intensity(i: f32) -> [u8; 3] {
     [g, g, g]
 }
 
+/// Frames further apart than this many times the samples make a grid anisotropic: its
+/// triangles' angles are judged after scaling (below it, the study's rule as it is).
+const ANISOTROPY_MIN: f32 = 1.5;
+
+/// The anisotropy of a grid whose frames lie further apart than its samples (a fast scan, or a
+/// high-resolution camera): the mean direction from one frame to the next, and the factor that
+/// brings the frame spacing down to the sample spacing. A triangle judged in that squeezed space
+/// keeps the study's 12-degree rule for what it is meant for (slivers across depth jumps, which
+/// are not along the travel), and a flat surface's own cells are no longer slivers.
+#[derive(Debug, Clone, Copy)]
+struct GridShape {
+    frame_dir: [f32; 3],
+    squeeze: f32,
+}
+
+impl GridShape {
+    /// Every this many cells are sampled for the spacings.
+    const STRIDE: usize = 7;
+
+    fn of(grid: &Grid, max_edge: f32) -> Option<GridShape> {
+        let (ns, nf) = (grid.samples(), grid.frames());
+        let pts = grid.points();
+        let lim2 = max_edge * max_edge;
+        let (mut across, mut along) = (Vec::new(), Vec::new());
+        let mut dir = [0.0f32; 3];
+        for i in (0..ns * nf.saturating_sub(1)).step_by(Self::STRIDE) {
+            let (p, q) = (pts[i], pts[i + ns]);
+            if p[0].is_finite() && q[0].is_finite() && dist2(p, q) <= lim2 {
+                along.push(dist2(p, q));
+                let d = sub(q, p);
+                dir = [dir[0] + d[0], dir[1] + d[1], dir[2] + d[2]];
+            }
+            if i % ns + 1 < ns {
+                let r = pts[i + 1];
+                if p[0].is_finite() && r[0].is_finite() && dist2(p, r) <= lim2 {
+                    across.push(dist2(p, r));
+                }
+            }
+        }
+        let median = |v: &mut Vec<f32>| -> Option<f32> {
+            let mid = v.len() / 2;
+            (!v.is_empty()).then(|| v.select_nth_unstable_by(mid, f32::total_cmp).1.sqrt())
+        };
+        let ratio = median(&mut along)? / median(&mut across)?;
+        let norm = dot(dir, dir).sqrt();
+        (ratio > ANISOTROPY_MIN && norm > 0.0)
+            .then(|| GridShape { frame_dir: dir.map(|v| v / norm), squeeze: 1.0 - 1.0 / ratio })
+    }
+
+    /// `p` with its component along the frames scaled down by the anisotropy.
+    fn squeezed(self, p: [f32; 3]) -> [f32; 3] {
+        let k = self.squeeze * dot(p, self.frame_dir);
+        [p[0] - k * self.frame_dir[0], p[1] - k * self.frame_dir[1], p[2] - k * self.frame_dir[2]]
+    }
+}
+
 /// Calls `emit([a, b, c])` (grid indices) for every triangle the mesher makes of `grid`.
 fn grid_triangles(grid: &Grid, cfg: &MeshConfig, mut emit: impl FnMut([usize; 3])) {
     let (ns, nf) = (grid.samples(), grid.frames());
@@ -438,10 +497,16 @@ fn grid_triangles(grid: &Grid, cfg: &MeshConfig, mut emit: impl FnMut([usize; 3]
     let sin_min = cfg.min_angle_deg.to_radians().sin();
     let limit = |i: usize| cfg.max_edge_m + cfg.max_edge_per_m * grid.range()[i].max(0.0);
     let fixed = cfg.max_edge_per_m == 0.0;
-    // Accept a triangle of grid indices if its edges and angles pass.
+    let shape = GridShape::of(grid, cfg.max_edge_m);
+    // Accept a triangle of grid indices if its edges and angles pass; on an anisotropic grid
+    // the angles are judged with the frame spacing scaled to the sample spacing.
     let ok = |a: usize, b: usize, c: usize| -> bool {
         let max_edge = if fixed { cfg.max_edge_m } else { limit(a).min(limit(b)).min(limit(c)) };
-        triangle_ok([pts[a], pts[b], pts[c]], max_edge, sin_min)
+        let t = [pts[a], pts[b], pts[c]];
+        match shape {
+            None => triangle_ok(t, max_edge, sin_min),
+            Some(g) => triangle_ok(t, max_edge, 0.0) && triangle_ok(t.map(|p| g.squeezed(p)), f32::INFINITY, sin_min),
+        }
     };
     for f in 0..nf.saturating_sub(1) {
         for s in 0..ns.saturating_sub(1) {
@@ -605,10 +670,16 @@ mod tests {
     fn long_edges_and_slivers_are_refused() {
         let g = flat_grid(3, 3, 0.001, 0.02);
         assert_eq!(mesh_grid(&g, &MeshConfig::default()).triangles.len(), 0, "20 mm edges");
-        // 0.5 mm x 10 mm cells: smallest angle 2.9 degrees.
+        // 0.5 mm x 10 mm cells (smallest angle 2.9 degrees) are the grid's own aspect when every
+        // cell is so: meshed (see the anisotropic test). A sliver inside an isotropic grid is
+        // refused: one sample pulled 0.9 mm along its cell's diagonal.
         let g = flat_grid(3, 3, 0.0005, 0.010);
-        assert_eq!(mesh_grid(&g, &MeshConfig::default()).triangles.len(), 0);
-        let cfg = MeshConfig { min_angle_deg: 2.0, ..Default::default() };
+        assert_eq!(mesh_grid(&g, &MeshConfig::default()).triangles.len(), 8);
+        let mut g = flat_grid(3, 3, 0.001, 0.001);
+        g.points[4] = [0.0019, 0.0019, 0.0];
+        let n = mesh_grid(&g, &MeshConfig::default()).triangles.len();
+        assert!(n < 8, "{n} triangles: the slivers next to the displaced sample are refused");
+        let cfg = MeshConfig { min_angle_deg: 0.5, ..Default::default() };
         assert_eq!(mesh_grid(&g, &cfg).triangles.len(), 8);
     }
 
@@ -672,5 +743,35 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(g.push(1, &p), Err(3));
+    }
+
+    #[test]
+    fn anisotropic_grid_keeps_its_surface_and_still_refuses_depth_jumps() {
+        // Frames 10 times further apart than samples: 0.5 mm across, 5 mm along the travel.
+        let flat = flat_grid(40, 30, 0.0005, 0.005);
+        let cfg = MeshConfig::default();
+        let mesh = mesh_grid(&flat, &cfg);
+        assert_eq!(mesh.triangles.len(), 2 * 39 * 29, "every cell of a flat anisotropic grid is meshed");
+        // The study's rule alone would drop them all (smallest angle 5.7 degrees).
+        assert!(GridShape::of(&flat, cfg.max_edge_m).is_some());
+        // A depth jump across the samples (a 4 mm step in z between two samples) is still not
+        // bridged: its triangles are slivers in any scaling.
+        let mut g = Grid::new(40);
+        for f in 0..30 {
+            let p = Profile {
+                points: (0..40)
+                    .map(|s| [s as f32 * 0.0005, f as f32 * 0.005, if s < 20 { 0.0 } else { 0.004 }])
+                    .collect(),
+                intensity: vec![100.0; 40],
+                rgb: None,
+                range: vec![1.0; 40],
+                ..Default::default()
+            };
+            g.push(f as i64, &p).unwrap();
+        }
+        let mesh = mesh_grid(&g, &cfg);
+        assert_eq!(mesh.triangles.len(), 2 * 38 * 29, "the cells across the jump are refused, the others kept");
+        // An isotropic grid keeps the study's rule exactly.
+        assert!(GridShape::of(&flat_grid(20, 20, 0.001, 0.0012), cfg.max_edge_m).is_none());
     }
 }

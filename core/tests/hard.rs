@@ -364,3 +364,18 @@ fn probe_band() {
         }
     }
 }
+
+/// The whole acceptance matrix as a table (run with `--ignored --nocapture`; BENCHMARKS.md and
+/// the issue note quote it).
+#[test]
+#[ignore]
+fn report() {
+    for (scene, speed) in [("pyramid", 0.070), ("phantom", 0.070), ("body", 0.140)] {
+        for size in [(320, 240), (640, 480)] {
+            for enc in [Encoding::Mono8, Encoding::Rgb8] {
+                scan(scene, size, enc, speed, Method::CenterOfGravity);
+            }
+        }
+    }
+    scan("phantom", (640, 480), Encoding::Mono8, 0.070, Method::Gradient);
+}

@@ -9,6 +9,11 @@ use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
 
+/// An `f32` default as the `f64` it was written as (0.15, not 0.15000000596046448).
+fn as_written(v: f32) -> f64 {
+    v.to_string().parse().unwrap_or(f64::from(v))
+}
+
 /// The parameters of `edge_detector`.
 pub fn declarations() -> Vec<ParamDecl> {
     let d = EdgeConfig::default();
@@ -37,19 +42,19 @@ pub fn declarations() -> Vec<ParamDecl> {
         decl("roi.height", V::Integer(0), "px", "rows searched (0: to the edge)"),
         decl(
             "min_strength",
-            V::Double(d.min_strength.into()),
+            V::Double(as_written(d.min_strength)),
             "grey levels",
             "smallest peak height above the local background (8-bit scale)",
         ),
         decl(
             "noise_factor",
-            V::Double(d.noise_factor.into()),
+            V::Double(as_written(d.noise_factor)),
             "",
             "the peak must also exceed this many local noise standard deviations",
         ),
         decl(
             "peak_fraction",
-            V::Double(d.peak_fraction.into()),
+            V::Double(as_written(d.peak_fraction)),
             "",
             "samples above background + this fraction of the peak take part in the centre",
         ),
@@ -60,34 +65,34 @@ pub fn declarations() -> Vec<ParamDecl> {
             "largest half-width searched around a peak",
         ),
         decl("flank_px", V::Integer(d.flank_px.into()), "px", "length of each background flank"),
-        decl("max_width_px", V::Double(d.max_width_px.into()), "px", "wider peaks (FWHM) are rejected as smeared"),
+        decl("max_width_px", V::Double(as_written(d.max_width_px)), "px", "wider peaks (FWHM) are rejected as smeared"),
         decl(
             "min_width_px",
-            V::Double(d.min_width_px.into()),
+            V::Double(as_written(d.min_width_px)),
             "px",
             "narrower peaks (FWHM) are rejected: set it for a camera whose line is wide (edge overshoot, fine texture)",
         ),
         decl(
             "gradient_threshold",
-            V::Double(d.gradient_threshold.into()),
+            V::Double(as_written(d.gradient_threshold)),
             "grey levels",
             "for method gradient: the five-pixel rise that marks the line",
         ),
         decl(
             "color_offset_px",
-            V::Double(d.color_offset_px.into()),
+            V::Double(as_written(d.color_offset_px)),
             "px",
             "colour is sampled this far either side of the line",
         ),
         decl(
             "min_side_ratio",
-            V::Double(d.min_side_ratio.into()),
+            V::Double(as_written(d.min_side_ratio)),
             "",
             "a line rises above the background on both sides: the lower rise is at least this fraction of the higher (a step is not a line)",
         ),
         decl(
             "narrow_width_px",
-            V::Double(d.narrow_width_px.into()),
+            V::Double(as_written(d.narrow_width_px)),
             "px",
             "lines narrower than this (FWHM) are located by a pixel-integrated Gaussian fit, whatever the method (no pixel locking)",
         ),
@@ -95,17 +100,17 @@ pub fn declarations() -> Vec<ParamDecl> {
             "max_candidates",
             V::Integer(d.max_candidates.into()),
             "",
-            "peaks tried per row, strongest first, until one passes every test",
+            "peaks tried per row until one passes every test: the brightest, the one of highest contrast, then the next brightest",
         ),
         decl(
             "min_run",
             V::Integer(d.min_run.into()),
             "rows",
-            "a line runs along at least this many consecutive rows (columns), and at least twice its width; shorter runs are dropped",
+            "a line runs along at least this many consecutive rows (columns); shorter runs are dropped, and so are runs under 4 times this that are shorter than twice their width or much wider than the line was in the last frames (highlights, marks)",
         ),
         decl(
             "max_jump_px",
-            V::Double(d.max_jump_px.into()),
+            V::Double(as_written(d.max_jump_px)),
             "px",
             "largest step of the line centre between neighbouring rows (columns) of one run",
         ),
