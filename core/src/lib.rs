@@ -16,15 +16,17 @@
 //! use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine};
 //! use xsurf_core::image::{Encoding, Image};
 //!
-//! // A 32x1 image with a bright line centred on column 12.
-//! let mut img = Image::new(32, 1, Encoding::Mono8);
-//! for (x, v) in img.data.iter_mut().enumerate() {
-//!     *v = (10.0 + 200.0 * (-((x as f32 - 12.0).powi(2)) / 4.5).exp()) as u8;
+//! // A 32x16 image with a bright vertical line centred on column 12 (a line runs along at
+//! // least `min_run` rows).
+//! let mut img = Image::new(32, 16, Encoding::Mono8);
+//! for (i, v) in img.data.iter_mut().enumerate() {
+//!     let x = (i % 32) as f32;
+//!     *v = (10.0 + 200.0 * (-((x - 12.0).powi(2)) / 4.5).exp()) as u8;
 //! }
 //! let mut detector = EdgeDetector::new(EdgeConfig::default()).unwrap();
 //! let mut line = LaserLine::default();
 //! detector.detect(&img.view().unwrap(), &mut line).unwrap();
-//! assert!((line.u[0] - 12.0).abs() < 0.05);
+//! assert!(line.u.iter().all(|u| (u - 12.0).abs() < 0.05));
 //! ```
 #![deny(missing_docs)]
 
