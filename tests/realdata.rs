@@ -168,7 +168,7 @@ fn robot_laser_line_is_found_in_every_frame_at_the_hand_labels() {
     // the line's own course: a jump to the floor's texture shows as a sample far from the
     // median of its neighbours on both sides (where the line steps over a block's edge, a
     // sample agrees with one side; where it climbs a block's edge steeply, a few samples on
-    // the climb agree with neither, which allows 4 a frame).
+    // the climb agree with neither, which allows 6 a frame).
     for n in 2..=86 {
         let line = detect(&robot_frame(n), robot_camera());
         let found = line.found();
@@ -187,6 +187,6 @@ fn robot_laser_line_is_found_in_every_frame_at_the_hand_labels() {
             .count();
         eprintln!("frame {n}: {found} of {} columns, {jumps} off the line's course", line.len());
         assert!(found >= 320, "frame {n}: the line in only {found} columns");
-        assert!(jumps <= 4, "frame {n}: {jumps} samples off the line's course");
+        assert!(jumps <= 6, "frame {n}: {jumps} samples off the line's course");
     }
 }

@@ -467,22 +467,53 @@ fn find_peak<S: Sample>(
     // One sample further than a line may reach, so that a line too wide shows as such.
     let (lo, hi) = S::run(p, m, max_hw + 1, half0);
     let run = (lo.saturating_sub(1), hi + 1);
-    // The flanks just clear the line: twice its half-width and two more samples out, and for a
-    // line a pixel or two wide, GAP_PER_WIDTH times its width (at half the first pass's
-    // height), right beside it (a dim line in a narrow dark stripe has its background within a
-    // few pixels).
-    let w0 = if lo > 0 && hi + 1 < p.len() {
-        let level = f0.mean + 0.5 * (peak - f0.mean);
-        crossing(p, hi + 1, hi, level) - crossing(p, lo - 1, lo, level)
-    } else {
-        (hi - lo + 1) as f32
-    };
+    // The flanks just clear the line: twice its half-width and two more samples out.
     let hw = (m - lo).max(hi - m);
-    let gap = if hw >= 2 { 2 * hw + 2 } else { (GAP_PER_WIDTH * w0).ceil() as usize }.clamp(1, max_hw);
+    let gap = (2 * hw + 2).max(gap0).min(max_hw);
     let f = match if gap == gap0 { Some(f0) } else { background(p, m, gap, flank) } {
         Some(f) => f,
         None => return Err(run),
     };
+    // With the first flanks, the first pass's run is the half-maximum run.
+    let known = (gap == gap0).then_some((lo, hi));
+    match judge(p, m, &f, known, cfg, (scale, saturation), run) {
+        // A line a pixel or two wide, clearly above its near samples, that fails with flanks
+        // `gap0` out may lie in a narrow dark stripe between brighter surfaces: its background
+        // is right beside it, GAP_PER_WIDTH times its width out.
+        Err(_)
+            if hw <= 1
+                && lo > 1
+                && hi + 2 < n
+                && peak - p[lo - 2].f().max(p[hi + 2].f()) >= NARROW_RETRY * cfg.min_strength * scale =>
+        {
+            let level = f0.mean + 0.5 * (peak - f0.mean);
+            let w0 = crossing(p, hi + 1, hi, level) - crossing(p, lo - 1, lo, level);
+            let near = ((GAP_PER_WIDTH * w0).ceil() as usize).clamp(1, max_hw);
+            match background(p, m, near, flank).filter(|_| near < gap) {
+                Some(f) => judge(p, m, &f, None, cfg, (scale, saturation), run),
+                None => Err(run),
+            }
+        }
+        other => other,
+    }
+}
+
+/// The tests of a peak at `m` against its flanks `f`, and its centre: too weak for the local
+/// noise, a step rather than a peak, cut off by the edge of the profile, or too wide or narrow
+/// is refused (with `run`, where the next candidate is not looked for). `known` is the
+/// half-maximum run when it is already known.
+fn judge<S: Sample>(
+    p: &[S],
+    m: usize,
+    f: &Flanks,
+    known: Option<(usize, usize)>,
+    cfg: &EdgeConfig,
+    (scale, saturation): (f32, f32),
+    run: (usize, usize),
+) -> Result<Peak, (usize, usize)> {
+    let n = p.len();
+    let peak = p[m].f();
+    let max_hw = cfg.max_half_width_px as usize;
     let bg = f.mean;
     let strength = peak - bg;
     let floor = (cfg.min_strength * scale).max(cfg.noise_factor * f.noise);
@@ -496,8 +527,7 @@ fn find_peak<S: Sample>(
     }
     // Full width at half maximum.
     let half = bg + 0.5 * strength;
-    // With the first flanks, `half` is the first pass's level and its run is already known.
-    let (l, r) = if gap == gap0 { (lo, hi) } else { S::run(p, m, max_hw + 1, S::cut(half)) };
+    let (l, r) = known.unwrap_or_else(|| S::run(p, m, max_hw + 1, S::cut(half)));
     if l == 0 || r + 1 >= n {
         return Err(run); // the line runs into the edge of the profile
     }
@@ -659,7 +689,11 @@ impl Search<'_, '_> {
     }
 }
 
-/// The background flanks start this many line widths (FWHM) from the peak.
+/// A narrow peak is tried again with flanks right beside it when it stands this many times
+/// `min_strength` above the samples two beyond its half-maximum run.
+const NARROW_RETRY: f32 = 2.0;
+
+/// The flanks of a narrow line tried again start this many line widths (FWHM) from the peak.
 const GAP_PER_WIDTH: f32 = 1.2;
 
 /// A frame's line sets the typical width when it has at least this many samples.
