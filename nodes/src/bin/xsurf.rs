@@ -1,8 +1,8 @@
 //! `xsurf`: the offline tools.
 //!
 //! ```text
-//! xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S]
-//! xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding E] [--seed N] [--zstd]
+//! xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S] [--preset ideal|hard] [--encoding E]
+//! xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding E] [--seed N] [--preset ideal|hard] [--zstd]
 //! xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
 //! xsurf bag info DIR
 //! xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--duration S]
@@ -19,13 +19,13 @@ use std::process::ExitCode;
 use xsurf_core::eval;
 use xsurf_core::image::Encoding;
 use xsurf_core::rig::Rig;
-use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene, SCENE_NAMES};
+use xsurf_core::synth::{Preset, ScanSettings, Scanner, Scene, SCENE_NAMES};
 use xsurf_nodes::{offline, synth, UsageError};
 
 const USAGE: &str = "usage:
-  xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S]
+  xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S] [--preset ideal|hard] [--encoding E]
       synthesize a scan, reconstruct it, write the files and report the accuracy (default out: ./xsurf-demo)
-  xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--zstd] [--frames N]
+  xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--preset ideal|hard] [--zstd] [--frames N]
       write a synthetic scan as a rosbag2 bag plus its ground truth and radiograph (scenes: pyramid, phantom,
       sphere, cylinder, box, body); with --frames N, N frames per camera as PGM files instead (DIR/<camera>/)
   xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
@@ -126,13 +126,18 @@ fn scanner(a: &Args, scene: &str) -> anyhow::Result<Scanner> {
         "bgr8" => Encoding::Bgr8,
         other => return Err(usage(format!("--encoding {other}: expected mono8, rgb8 or bgr8"))),
     };
-    let settings = ScanSettings {
+    let preset = match a.get("--preset") {
+        None => Preset::Ideal,
+        Some(p) => Preset::parse(p).ok_or_else(|| usage(format!("--preset {p}: expected ideal or hard")))?,
+    };
+    let mut settings = ScanSettings {
         speed_mps: a.num("--speed", 0.070)?,
         fps: a.num("--fps", 30.0)?,
         seed: a.num("--seed", 1u64)?,
         encoding,
         ..ScanSettings::default()
     };
+    preset.apply(&mut settings);
     let rig = match a.get("--rig") {
         None => Rig::study(w, h),
         Some(f) => {
@@ -143,7 +148,7 @@ fn scanner(a: &Args, scene: &str) -> anyhow::Result<Scanner> {
             rig
         }
     };
-    Ok(Scanner::new(scene, rig, LaserModel::default(), settings)?)
+    Ok(Scanner::new(scene, rig, preset.laser(), settings)?)
 }
 
 fn progress_printer(label: &'static str) -> impl FnMut(u32, u32) {
@@ -160,7 +165,7 @@ fn cmd_synth(args: &[String]) -> anyhow::Result<()> {
     let a = Args::parse(
         args,
         &["--zstd"],
-        &["-o", "--out", "--size", "--speed", "--fps", "--encoding", "--seed", "--rig", "--frames"],
+        &["-o", "--out", "--size", "--speed", "--fps", "--encoding", "--seed", "--rig", "--frames", "--preset"],
     )?;
     let [scene] = a.positional.as_slice() else { return Err(usage("synth needs one SCENE")) };
     let out = a.get("-o").or(a.get("--out")).ok_or_else(|| usage("synth needs -o DIR"))?;
@@ -256,7 +261,7 @@ fn print_report(r: &offline::Report, out: &str) {
 }
 
 fn cmd_demo(args: &[String]) -> anyhow::Result<()> {
-    let a = Args::parse(args, &[], &["--out", "-o", "--scene", "--size", "--speed"])?;
+    let a = Args::parse(args, &[], &["--out", "-o", "--scene", "--size", "--speed", "--preset", "--encoding"])?;
     if !a.positional.is_empty() {
         return Err(usage(format!("demo takes no positional arguments, got {:?}", a.positional)));
     }
