@@ -413,8 +413,10 @@ fn side<S: Sample>(p: &[S], start: usize, end: usize) -> Side {
         return whole(a + c, b + d, k, start);
     }
     let (first, second) = (whole(a, b, h, start), whole(c, d, k - h, start + h));
-    let sd = |s: &Side| (s.ss.max(0.0) / s.count as f32).sqrt();
-    if (first.mean - second.mean).abs() <= HALF_AGREEMENT * sd(&first).min(sd(&second)) + 1.0 {
+    // |difference| <= HALF_AGREEMENT * (the quieter half's sd) + 1, in squares (no roots).
+    let var = |s: &Side| s.ss.max(0.0) / s.count as f32;
+    let excess = ((first.mean - second.mean).abs() - 1.0).max(0.0);
+    if excess * excess <= HALF_AGREEMENT * HALF_AGREEMENT * var(&first).min(var(&second)) {
         Side { ss: first.ss + second.ss, ..whole(a + c, b + d, k, start) }
     } else if first.mean < second.mean {
         first
