@@ -133,7 +133,8 @@ pub(super) fn typical_width(line: &LaserLine, min: usize, scratch: &mut Vec<f32>
 /// Runs shorter than this many times `min_run` are judged by their shape as well.
 const BLOB_RUNS: u32 = 4;
 
-/// Clears every run shorter than `min_run`, and every short run (under `BLOB_RUNS` times
+/// Clears every run shorter than `min_run`, the samples of a kept run more than
+/// `WIDTH_TOLERANCE` times its median width, and every short run (under `BLOB_RUNS` times
 /// `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean width; returns the samples
 /// cleared.
 ///
@@ -153,6 +154,18 @@ pub(super) fn drop_short_runs(
         let too_wide =
             r.count < WIDE_RUNS * cfg.min_run && typical_width_px.is_some_and(|t| width > WIDTH_TOLERANCE * t);
         if r.count >= cfg.min_run && !blob && !too_wide {
+            // A kept run: its samples far wider than its own median are mixed pixels (the line
+            // straddling a dark/bright edge, or running into a highlight).
+            let mut widths: Vec<f32> =
+                (r.first..=r.last).map(|s| line.width[s as usize]).filter(|w| *w > 0.0).collect();
+            let mid = widths.len() / 2;
+            let median = *widths.select_nth_unstable_by(mid, f32::total_cmp).1;
+            for s in r.first..=r.last {
+                if line.width[s as usize] > WIDTH_TOLERANCE * median && line.across(s as usize).is_finite() {
+                    line.clear(s as usize);
+                    dropped += 1;
+                }
+            }
             continue;
         }
         for s in r.first..=r.last {
