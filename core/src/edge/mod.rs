@@ -796,9 +796,12 @@ impl EdgeDetector {
             let profile = &mut self.scratch;
             let state = &mut self.state;
             track::extend(out, cfg, search.outer.clone(), |out, s, near| {
+                // A search that finds nothing near this run's course leaves the sample as it was.
                 let peak = search.sample(s, Some(near), profile);
                 let found = peak.is_some();
-                put(out, state, s, peak);
+                if found {
+                    put(out, state, s, peak);
+                }
                 found
             });
             stats.short_runs = track::drop_short_runs(out, cfg, search.outer.clone(), self.width_px);

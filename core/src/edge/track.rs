@@ -42,8 +42,8 @@ pub(super) fn runs(line: &LaserLine, range: Range<u32>, max_jump_px: f32) -> Vec
 
 /// Extends every run of at least `min_run` samples, longest first, beyond its ends: the next
 /// sample's position is extrapolated from the run's last samples, and `probe(line, s, (centre,
-/// radius))` searches sample `s` near it, writing what it finds (or clearing the sample) and
-/// saying whether it found a peak. A sample that a longer run already holds stops the
+/// radius))` searches sample `s` near it, writing what it finds (and leaving the sample as it
+/// was when it finds nothing) and saying whether it found a peak. A sample that a longer run already holds stops the
 /// extension; one that a shorter run holds is searched again near this run's course.
 pub(super) fn extend(
     line: &mut LaserLine,
@@ -86,7 +86,6 @@ pub(super) fn extend(
                     owner[s as usize] = rank;
                     (end, misses) = (s, 0);
                 } else {
-                    owner[s as usize] = u32::MAX;
                     misses += 1;
                     if misses > MAX_GAP {
                         break;
