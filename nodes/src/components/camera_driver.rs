@@ -2,7 +2,7 @@
 //! `<camera>_optical_frame`). Source `synthetic`: the synthetic scanner renders what the camera
 //! sees with the C-arm where `/tf` says it is at the exposure, the laser on between a scan's
 //! START and END; CI and demos use it in place of a camera. Source `files`: an image sequence
-//! (the study's `frame_000.bmp`..., BMP/PNG/PGM/PPM) at `fps`, stamped from the rate or a
+//! (the study's `frame_000.bmp`..., BMP/PNG/PGM/PPM/JPEG) at `fps`, stamped from the rate or a
 //! sidecar file. camera_info comes from `camera_info_url` (the camera_calibration YAML) or the
 //! rig. `rotate_180` turns every image (the study's cameras hung upside down); the calibration
 //! must then describe the turned images.
@@ -41,7 +41,7 @@ pub fn declarations() -> Vec<ParamDecl> {
             "files",
             V::String(String::new()),
             "",
-            "files source: a directory (its .bmp/.png/.pgm/.ppm in name order) or a pattern such as /data/frame_%03d.bmp",
+            "files source: a directory (its .bmp/.png/.pgm/.ppm/.jpg in name order) or a pattern such as /data/frame_%03d.bmp",
         ),
         decl(
             "timestamps_file",
@@ -215,7 +215,7 @@ fn frame_list(spec: &str) -> Result<Vec<std::path::PathBuf>, String> {
     let is_frame = |p: &Path| {
         p.extension()
             .map(|e| e.to_string_lossy().to_ascii_lowercase())
-            .is_some_and(|e| ["bmp", "png", "pgm", "ppm", "pnm"].contains(&e.as_str()))
+            .is_some_and(|e| ["bmp", "png", "pgm", "ppm", "pnm", "jpg", "jpeg"].contains(&e.as_str()))
     };
     let path = Path::new(spec);
     let list: Vec<PathBuf> = if path.is_dir() {
