@@ -618,7 +618,7 @@ pub struct EdgeDetector {
     sigma_px: Option<f32>,
     /// The line's typical width (median FWHM, pixels) in the last frame that had a line.
     width_px: Option<f32>,
-    /// Scratch for that median.
+    /// Scratch for widths' medians (the frame's, each run's).
     widths: Vec<f32>,
 }
 
@@ -804,7 +804,7 @@ impl EdgeDetector {
                 }
                 found
             });
-            stats.short_runs = track::drop_short_runs(out, cfg, search.outer.clone(), self.width_px);
+            stats.short_runs = track::drop_short_runs(out, cfg, search.outer.clone(), self.width_px, &mut self.widths);
             if let Some(w) = track::typical_width(out, TYPICAL_WIDTH_SAMPLES, &mut self.widths) {
                 self.width_px = Some(w);
             }

@@ -145,6 +145,7 @@ pub(super) fn drop_short_runs(
     cfg: &EdgeConfig,
     range: Range<u32>,
     typical_width_px: Option<f32>,
+    scratch: &mut Vec<f32>,
 ) -> u32 {
     let mut dropped = 0;
     for r in runs(line, range, cfg.max_jump_px) {
@@ -155,10 +156,10 @@ pub(super) fn drop_short_runs(
         if r.count >= cfg.min_run && !blob && !too_wide {
             // A kept run: its samples far wider than its own median are mixed pixels (the line
             // straddling a dark/bright edge, or running into a highlight).
-            let mut widths: Vec<f32> =
-                (r.first..=r.last).map(|s| line.width[s as usize]).filter(|w| *w > 0.0).collect();
-            let mid = widths.len() / 2;
-            let median = *widths.select_nth_unstable_by(mid, f32::total_cmp).1;
+            scratch.clear();
+            scratch.extend((r.first..=r.last).map(|s| line.width[s as usize]).filter(|w| *w > 0.0));
+            let mid = scratch.len() / 2;
+            let median = *scratch.select_nth_unstable_by(mid, f32::total_cmp).1;
             for s in r.first..=r.last {
                 if line.width[s as usize] > WIDTH_TOLERANCE * median && line.across(s as usize).is_finite() {
                     line.clear(s as usize);
