@@ -208,8 +208,13 @@ fn each_board_failure_is_explained() {
     let dark = Exposure { level: 5.0, ..Exposure::default() };
     let e = detect_at(&centred, &look, &dark).unwrap_err();
     assert!(matches!(e, BoardError::TooDark { .. }), "{e}");
-    // Out of focus.
-    let blurred = Exposure { blur_px: 4.0, ..Exposure::default() };
+    // Soft focus (4 px blur on 32 px squares) is still found, at the sharp image's corners;
+    // out of focus is explained.
+    let sharp = detect_at(&centred, &look, &ok).unwrap();
+    let soft = detect_at(&centred, &look, &Exposure { blur_px: 4.0, ..Exposure::default() }).unwrap();
+    let worst = sharp.iter().zip(&soft).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).fold(0.0, f64::max);
+    assert!(worst < 0.3, "soft focus moves a corner by {worst:.3} px");
+    let blurred = Exposure { blur_px: 12.0, ..Exposure::default() };
     let e = detect_at(&centred, &look, &blurred).unwrap_err();
     assert!(matches!(e, BoardError::Blurred { .. }), "{e}");
     // The wrong board size given: a larger lattice than asked for.

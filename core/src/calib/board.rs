@@ -196,11 +196,11 @@ const RING_PX: f64 = 3.5;
 const RING_SAMPLES: usize = 24;
 
 /// Whether the ring around `(x, y)` shows four alternating sectors with at least `min_contrast`.
-fn is_x_junction(g: &Grey, x: f64, y: f64, min_contrast: f32) -> bool {
+fn is_x_junction(g: &Grey, x: f64, y: f64, radius: f64, min_contrast: f32) -> bool {
     let mut s = [0.0f32; RING_SAMPLES];
     for (k, v) in s.iter_mut().enumerate() {
         let a = std::f64::consts::TAU * k as f64 / RING_SAMPLES as f64;
-        *v = g.sample(x + RING_PX * a.cos(), y + RING_PX * a.sin());
+        *v = g.sample(x + radius * a.cos(), y + radius * a.sin());
     }
     let (lo, hi) = s.iter().fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
     if hi - lo < min_contrast {
@@ -226,8 +226,9 @@ fn is_x_junction(g: &Grey, x: f64, y: f64, min_contrast: f32) -> bool {
     runs.len() == 4 && runs.iter().all(|&r| r >= 2)
 }
 
-/// X-junction candidates (integer positions).
-fn candidates(g: &Grey, min_contrast: f32) -> Vec<[f64; 2]> {
+/// The corner response of a smoothed image: the negative Hessian determinant where it is
+/// positive (saddles), zero elsewhere; and its maximum.
+fn saddle_response(g: &Grey) -> (Vec<f32>, f32) {
     let (w, h) = (g.w, g.h);
     let mut resp = vec![0.0f32; w * h];
     let mut max = 0.0f32;
@@ -244,6 +245,12 @@ fn candidates(g: &Grey, min_contrast: f32) -> Vec<[f64; 2]> {
             }
         }
     }
+    (resp, max)
+}
+
+/// X-junction candidates (integer positions) of a smoothed image with its response.
+fn candidates(g: &Grey, resp: &[f32], max: f32, min_contrast: f32) -> Vec<[f64; 2]> {
+    let (w, h) = (g.w, g.h);
     let thr = 0.02 * max;
     let mut out = Vec::new();
     const NMS: usize = 3;
@@ -261,7 +268,7 @@ fn candidates(g: &Grey, min_contrast: f32) -> Vec<[f64; 2]> {
                     }
                 }
             }
-            if is_x_junction(g, x as f64, y as f64, min_contrast) {
+            if is_x_junction(g, x as f64, y as f64, RING_PX, min_contrast) {
                 out.push([x as f64, y as f64]);
             }
         }
@@ -271,73 +278,243 @@ fn candidates(g: &Grey, min_contrast: f32) -> Vec<[f64; 2]> {
 
 type Cell = (i32, i32);
 
-/// Grows a lattice from candidate `seed`; returns cell -> candidate index.
-fn grow(pts: &[[f64; 2]], seed: usize) -> HashMap<Cell, usize> {
-    let d2 = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2);
-    let mut grid = HashMap::new();
-    let mut near: Vec<usize> = (0..pts.len()).filter(|&k| k != seed).collect();
-    near.sort_by(|&a, &b| d2(pts[a], pts[seed]).total_cmp(&d2(pts[b], pts[seed])));
-    let Some(&a) = near.first() else { return grid };
-    let va = [pts[a][0] - pts[seed][0], pts[a][1] - pts[seed][1]];
-    let la = d2(pts[a], pts[seed]).sqrt();
-    let b = near.iter().skip(1).take(8).copied().find(|&k| {
-        let vb = [pts[k][0] - pts[seed][0], pts[k][1] - pts[seed][1]];
-        let lb = d2(pts[k], pts[seed]).sqrt();
-        (va[0] * vb[0] + va[1] * vb[1]).abs() / (la * lb) < 0.6 && lb < 2.0 * la
-    });
-    let Some(b) = b else { return grid };
-    let mut used = vec![false; pts.len()];
-    for (cell, k) in [((0, 0), seed), ((1, 0), a), ((0, 1), b)] {
-        grid.insert(cell, k);
-        used[k] = true;
+fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
+}
+
+/// What the lattice search works on: the images, the corner response and the candidates.
+struct Search<'a> {
+    /// Lightly smoothed image: square colours.
+    fine: &'a Grey,
+    /// Smoothed images with their corner responses, finest first: X-junction tests at the
+    /// lattice's scale (a coarser one closes the gaps of boards whose squares do not quite touch).
+    levels: &'a [Level],
+    /// Ring contrast an X-junction needs.
+    min_contrast: f32,
+}
+
+/// One scale of the corner search.
+struct Level {
+    sigma: f64,
+    grey: Grey,
+    resp: Vec<f32>,
+}
+
+impl Level {
+    fn new(raw: &Grey, sigma: f64) -> Level {
+        let grey = raw.blurred(sigma);
+        let (resp, _) = saddle_response(&grey);
+        Level { sigma, grey, resp }
     }
-    let dirs: [Cell; 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
-    loop {
-        let mut added = false;
-        let cells: Vec<Cell> = grid.keys().copied().collect();
-        for c in cells {
-            for d in dirs {
-                let t = (c.0 + d.0, c.1 + d.1);
-                if grid.contains_key(&t) {
+}
+
+/// Smoothing of the corner search's levels, pixels.
+const LEVEL_SIGMAS: [f64; 3] = [1.5, 3.0, 6.0];
+
+/// A lattice being grown: cell -> point, the points (candidates plus corners found by local
+/// search), and which square colour cell (0, 0) has.
+struct Lattice {
+    grid: HashMap<Cell, usize>,
+    pts: Vec<[f64; 2]>,
+    /// +1 when square (0, 0) (between corners (0, 0) and (1, 1)) is the brighter colour.
+    phase: f64,
+    /// Sign of the image-space cross product of the lattice's i and j steps.
+    handed: f64,
+}
+
+/// The smallest corner spacing taken for a board, pixels: finer lattices (a speaker grille, a
+/// keyboard, a fabric) are texture, and the corner tests cannot resolve them.
+const MIN_STEP_PX: f64 = 2.0 * RING_PX + 1.0;
+
+/// Step to the next corner, as a fraction of the lattice step, within which a candidate is
+/// taken for the predicted corner.
+const CAPTURE: f64 = 0.35;
+
+impl Search<'_> {
+    /// Mean grey level of a square around `centre`, spanned by half-steps `u` and `v`.
+    fn square_value(&self, centre: [f64; 2], u: [f64; 2], v: [f64; 2]) -> f64 {
+        let mut s = 0.0;
+        for (a, b) in [(0.0, 0.0), (0.4, 0.0), (-0.4, 0.0), (0.0, 0.4), (0.0, -0.4)] {
+            s += f64::from(self.fine.sample(centre[0] + a * u[0] + b * v[0], centre[1] + a * u[1] + b * v[1]));
+        }
+        s / 5.0
+    }
+
+    /// Whether an edge from `c` to `t` (lattice cells, neighbours; `t` at `pt`) has the
+    /// checkerboard's colours, with enough contrast, in the two squares beside it and in the two
+    /// beyond `t`. The second pair keeps a lattice from stepping off the board onto a false
+    /// corner (a narrow white border against a darker background looks like an X-junction).
+    fn edge_ok(&self, lat: &Lattice, c: Cell, t: Cell, pt: [f64; 2]) -> bool {
+        let pc = lat.pts[lat.grid[&c]];
+        let d = (t.0 - c.0, t.1 - c.1);
+        let e = (d.1.abs(), d.0.abs()); // the other axis, positive direction
+        let p = |cell: Cell| lat.grid.get(&cell).map(|&k| lat.pts[k]);
+        let step = [pt[0] - pc[0], pt[1] - pc[1]];
+        // The lattice step along +e near the edge.
+        let perp = match (p((c.0 + e.0, c.1 + e.1)), p((c.0 - e.0, c.1 - e.1))) {
+            (Some(q), _) => [q[0] - pc[0], q[1] - pc[1]],
+            (None, Some(q)) => [pc[0] - q[0], pc[1] - q[1]],
+            (None, None) => {
+                // A quarter turn of the step, to the side the lattice's handedness puts +e.
+                let factor = if d.0 != 0 { lat.handed * f64::from(d.0) } else { -lat.handed * f64::from(d.1) };
+                [-step[1] * factor, step[0] * factor]
+            }
+        };
+        let half_step = [0.5 * step[0], 0.5 * step[1]];
+        let half_perp = [0.5 * perp[0], 0.5 * perp[1]];
+        let thr = f64::from(0.4 * self.min_contrast);
+        // Segment from `a` (cell) at `pa` one step along d: its +e square has its lower corner
+        // at min(a, a + d).
+        let segment_ok = |a: Cell, pa: [f64; 2]| {
+            let mid = [pa[0] + half_step[0], pa[1] + half_step[1]];
+            let plus = self.square_value([mid[0] + half_perp[0], mid[1] + half_perp[1]], half_step, half_perp);
+            let minus = self.square_value([mid[0] - half_perp[0], mid[1] - half_perp[1]], half_step, half_perp);
+            let sq = (a.0.min(a.0 + d.0), a.1.min(a.1 + d.1));
+            let sign = if (sq.0 + sq.1).rem_euclid(2) == 0 { lat.phase } else { -lat.phase };
+            (plus - minus) * sign > thr
+        };
+        segment_ok(c, pc) && segment_ok(t, pt)
+    }
+
+    /// The strongest X-junction within `radius` of `pred` that no candidate marks, tested at
+    /// the level whose smoothing suits the lattice `step` (pixels).
+    fn local_corner(&self, pred: [f64; 2], radius: f64, step: f64) -> Option<[f64; 2]> {
+        let level = self.levels.iter().rev().find(|l| l.sigma <= step / 8.0).or(self.levels.first())?;
+        let (w, h) = (level.grey.w as i64, level.grey.h as i64);
+        let r = radius.ceil() as i64;
+        let (cx, cy) = (pred[0].round() as i64, pred[1].round() as i64);
+        let mut best: Option<(f32, [f64; 2])> = None;
+        for y in (cy - r).max(2)..=(cy + r).min(h - 3) {
+            for x in (cx - r).max(2)..=(cx + r).min(w - 3) {
+                let q = [x as f64, y as f64];
+                let v = level.resp[y as usize * w as usize + x as usize];
+                if v > 0.0 && d2(q, pred) <= radius * radius && best.is_none_or(|(b, _)| v > b) {
+                    best = Some((v, q));
+                }
+            }
+        }
+        let (_, q) = best?;
+        let ring = RING_PX.max(2.5 * level.sigma).min(0.3 * step);
+        is_x_junction(&level.grey, q[0], q[1], ring, 0.5 * self.min_contrast).then_some(q)
+    }
+
+    /// Starts a lattice at candidate `seed`: two neighbours at about a right angle whose four
+    /// squares around the seed alternate in colour.
+    fn start(&self, pts: &[[f64; 2]], seed: usize) -> Option<Lattice> {
+        let ps = pts[seed];
+        let mut near: Vec<usize> = (0..pts.len()).filter(|&k| k != seed).collect();
+        near.sort_by(|&a, &b| d2(pts[a], ps).total_cmp(&d2(pts[b], ps)));
+        near.truncate(8);
+        for (n, &a) in near.iter().enumerate() {
+            let va = [pts[a][0] - ps[0], pts[a][1] - ps[1]];
+            let la = va[0].hypot(va[1]);
+            for &b in near.iter().skip(n + 1) {
+                let vb = [pts[b][0] - ps[0], pts[b][1] - ps[1]];
+                let lb = vb[0].hypot(vb[1]);
+                let square = (va[0] * vb[0] + va[1] * vb[1]).abs() / (la * lb) < 0.6 && lb < 2.0 * la && la < 2.0 * lb;
+                if !square || la.min(lb) < MIN_STEP_PX {
                     continue;
                 }
-                let p = |cell: Cell| grid.get(&cell).map(|&k| pts[k]);
-                let Some(pc) = p(c) else { continue };
-                let mut preds = Vec::new();
-                if let Some(pb) = p((c.0 - d.0, c.1 - d.1)) {
-                    // Perspective shortens (or stretches) successive steps by about the same ratio.
-                    let ratio = match p((c.0 - 2 * d.0, c.1 - 2 * d.1)) {
-                        Some(pa) => (d2(pc, pb) / d2(pb, pa).max(1e-12)).sqrt().clamp(0.5, 2.0),
-                        None => 1.0,
-                    };
-                    preds.push([pc[0] + (pc[0] - pb[0]) * ratio, pc[1] + (pc[1] - pb[1]) * ratio]);
+                let (hu, hv) = ([0.5 * va[0], 0.5 * va[1]], [0.5 * vb[0], 0.5 * vb[1]]);
+                let at = |su: f64, sv: f64| {
+                    self.square_value([ps[0] + su * hu[0] + sv * hv[0], ps[1] + su * hu[1] + sv * hv[1]], hu, hv)
+                };
+                let (s00, s11, s10, s01) = (at(1.0, 1.0), at(-1.0, -1.0), at(-1.0, 1.0), at(1.0, -1.0));
+                let thr = f64::from(0.4 * self.min_contrast);
+                let phase = (s00 - s10).signum();
+                let alternate = [s00 - s10, s00 - s01, s11 - s10, s11 - s01].iter().all(|&x| x * phase > thr);
+                if !alternate {
+                    continue;
                 }
-                for e in [(d.1, d.0), (-d.1, -d.0)] {
-                    if let (Some(ce), Some(te)) = (p((c.0 + e.0, c.1 + e.1)), p((t.0 + e.0, t.1 + e.1))) {
-                        preds.push([pc[0] + te[0] - ce[0], pc[1] + te[1] - ce[1]]);
+                let mut grid = HashMap::new();
+                grid.insert((0, 0), seed);
+                grid.insert((1, 0), a);
+                grid.insert((0, 1), b);
+                let handed = (va[0] * vb[1] - va[1] * vb[0]).signum();
+                return Some(Lattice { grid, pts: pts.to_vec(), phase, handed });
+            }
+        }
+        None
+    }
+
+    /// Grows a lattice from candidate `seed` by predicting each neighbour and taking the
+    /// candidate there (or an X-junction found by a local search) if the squares along the new
+    /// edge have the checkerboard's colours.
+    fn grow(&self, pts: &[[f64; 2]], seed: usize) -> Option<Lattice> {
+        let mut lat = self.start(pts, seed)?;
+        let mut used = vec![false; lat.pts.len()];
+        for &k in lat.grid.values() {
+            used[k] = true;
+        }
+        let dirs: [Cell; 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
+        loop {
+            let mut added = false;
+            let mut cells: Vec<Cell> = lat.grid.keys().copied().collect();
+            cells.sort_unstable();
+            for c in cells {
+                for d in dirs {
+                    let t = (c.0 + d.0, c.1 + d.1);
+                    if lat.grid.contains_key(&t) {
+                        continue;
                     }
-                }
-                if preds.is_empty() {
-                    continue;
-                }
-                let n = preds.len() as f64;
-                let pred = [preds.iter().map(|q| q[0]).sum::<f64>() / n, preds.iter().map(|q| q[1]).sum::<f64>() / n];
-                let step2 = d2(pred, pc);
-                let best =
-                    (0..pts.len()).filter(|&k| !used[k]).min_by(|&x, &y| d2(pts[x], pred).total_cmp(&d2(pts[y], pred)));
-                if let Some(k) = best {
-                    if d2(pts[k], pred) < 0.35f64.powi(2) * step2 {
-                        grid.insert(t, k);
+                    let Some(pred) = predict(&lat, c, d) else { continue };
+                    let pc = lat.pts[lat.grid[&c]];
+                    let step2 = d2(pred, pc);
+                    let radius = CAPTURE * step2.sqrt();
+                    let best = (0..lat.pts.len())
+                        .filter(|&k| !used[k])
+                        .min_by(|&x, &y| d2(lat.pts[x], pred).total_cmp(&d2(lat.pts[y], pred)))
+                        .filter(|&k| d2(lat.pts[k], pred) < radius * radius);
+                    let k = match best {
+                        Some(k) => k,
+                        None => match self.local_corner(pred, radius, step2.sqrt()) {
+                            Some(q) => {
+                                lat.pts.push(q);
+                                used.push(false);
+                                lat.pts.len() - 1
+                            }
+                            None => continue,
+                        },
+                    };
+                    if self.edge_ok(&lat, c, t, lat.pts[k]) {
+                        lat.grid.insert(t, k);
                         used[k] = true;
                         added = true;
                     }
                 }
             }
-        }
-        if !added {
-            return grid;
+            if !added {
+                return Some(lat);
+            }
         }
     }
+}
+
+/// Where the neighbour of `c` in direction `d` should be: the lattice continued along `d`
+/// (with perspective's steady change of step) and the parallelograms with the neighbours
+/// beside it, averaged.
+fn predict(lat: &Lattice, c: Cell, d: Cell) -> Option<[f64; 2]> {
+    let p = |cell: Cell| lat.grid.get(&cell).map(|&k| lat.pts[k]);
+    let pc = p(c)?;
+    let t = (c.0 + d.0, c.1 + d.1);
+    let mut preds = Vec::new();
+    if let Some(pb) = p((c.0 - d.0, c.1 - d.1)) {
+        let ratio = match p((c.0 - 2 * d.0, c.1 - 2 * d.1)) {
+            Some(pa) => (d2(pc, pb) / d2(pb, pa).max(1e-12)).sqrt().clamp(0.5, 2.0),
+            None => 1.0,
+        };
+        preds.push([pc[0] + (pc[0] - pb[0]) * ratio, pc[1] + (pc[1] - pb[1]) * ratio]);
+    }
+    for e in [(d.1, d.0), (-d.1, -d.0)] {
+        if let (Some(ce), Some(te)) = (p((c.0 + e.0, c.1 + e.1)), p((t.0 + e.0, t.1 + e.1))) {
+            preds.push([pc[0] + te[0] - ce[0], pc[1] + te[1] - ce[1]]);
+        }
+    }
+    if preds.is_empty() {
+        return None;
+    }
+    let n = preds.len() as f64;
+    Some([preds.iter().map(|q| q[0]).sum::<f64>() / n, preds.iter().map(|q| q[1]).sum::<f64>() / n])
 }
 
 /// A lattice grown with a diagonal as one of its axes (strong foreshortening makes a diagonal
@@ -371,6 +548,36 @@ fn extent(grid: &HashMap<Cell, usize>) -> (i32, i32, i32, i32, bool) {
     }
     let full = grid.len() as i64 == i64::from(i1 - i0 + 1) * i64::from(j1 - j0 + 1);
     (i0, j0, i1 - i0 + 1, j1 - j0 + 1, full)
+}
+
+/// The board's window in a lattice: the one full `cols x rows` (or `rows x cols`) rectangle of
+/// cells. None when there is none, or more than one (a larger checkerboard than asked for).
+fn board_window(grid: &HashMap<Cell, usize>, spec: &BoardSpec) -> Option<HashMap<Cell, usize>> {
+    if grid.is_empty() {
+        return None;
+    }
+    let (i0, j0, ci, cj, _) = extent(grid);
+    let mut found = Vec::new();
+    let mut sizes = vec![(spec.cols as i32, spec.rows as i32)];
+    if spec.cols != spec.rows {
+        sizes.push((spec.rows as i32, spec.cols as i32));
+    }
+    for (wc, wr) in sizes {
+        for a in i0..=i0 + ci - wc {
+            for b in j0..=j0 + cj - wr {
+                if (a..a + wc).all(|i| (b..b + wr).all(|j| grid.contains_key(&(i, j)))) {
+                    found.push((a, b, wc, wr));
+                }
+            }
+        }
+    }
+    let [(a, b, wc, wr)] = found[..] else { return None };
+    Some(
+        grid.iter()
+            .filter(|(&(i, j), _)| i >= a && i < a + wc && j >= b && j < b + wr)
+            .map(|(&c, &k)| (c, k))
+            .collect(),
+    )
 }
 
 /// Refines a corner: minimises `sum w (g . (p - q))^2` over the window (gradient `g` at `p`).
@@ -424,35 +631,48 @@ pub fn detect(view: &ImageView<'_>, spec: &BoardSpec) -> Result<Corners, BoardEr
     let raw = Grey::from_view(view);
     let (lo, hi) = (raw.percentile(0.01), raw.percentile(0.99));
     let fine = raw.blurred(0.8);
-    let coarse = raw.blurred(1.5);
-    let min_contrast = (0.25 * (hi - lo) as f32).max(6.0);
-    let pts = candidates(&coarse, min_contrast);
+    let min_contrast = (0.15 * (hi - lo) as f32).max(6.0);
+    let levels: Vec<Level> = LEVEL_SIGMAS.iter().map(|&s| Level::new(&raw, s)).collect();
+    let max = levels[0].resp.iter().fold(0.0f32, |m, &v| m.max(v));
+    let pts = candidates(&levels[0].grey, &levels[0].resp, max, min_contrast);
+    let search = Search { fine: &fine, levels: &levels, min_contrast };
 
-    // Seeds: candidates nearest the centroid first.
+    // Seeds: candidates nearest the centroid first; a seed already in a grown lattice would
+    // grow the same one again.
     let n = pts.len().max(1) as f64;
     let centroid = [pts.iter().map(|p| p[0]).sum::<f64>() / n, pts.iter().map(|p| p[1]).sum::<f64>() / n];
     let mut order: Vec<usize> = (0..pts.len()).collect();
-    order.sort_by(|&a, &b| {
-        let da = (pts[a][0] - centroid[0]).powi(2) + (pts[a][1] - centroid[1]).powi(2);
-        let db = (pts[b][0] - centroid[0]).powi(2) + (pts[b][1] - centroid[1]).powi(2);
-        da.total_cmp(&db)
-    });
-    let mut best: HashMap<Cell, usize> = HashMap::new();
-    for &seed in order.iter().take(12) {
-        let grid = unshear(grow(&pts, seed));
-        let (_, _, ci, cj, full) = extent(&grid);
-        let fits = full
-            && ((ci as usize, cj as usize) == (spec.cols, spec.rows)
-                || (ci as usize, cj as usize) == (spec.rows, spec.cols));
-        if fits {
-            return Ok(label(&grid, &pts, spec, &fine));
+    order.sort_by(|&a, &b| d2(pts[a], centroid).total_cmp(&d2(pts[b], centroid)));
+    let mut seen = vec![false; pts.len()];
+    let mut best = Lattice { grid: HashMap::new(), pts: Vec::new(), phase: 1.0, handed: 1.0 };
+    let mut tried = 0;
+    for &seed in &order {
+        if seen[seed] {
+            continue;
         }
-        if grid.len() > best.len() {
-            best = grid;
+        if tried == MAX_SEEDS {
+            break;
+        }
+        tried += 1;
+        let Some(mut lat) = search.grow(&pts, seed) else { continue };
+        for &k in lat.grid.values() {
+            if let Some(s) = seen.get_mut(k) {
+                *s = true;
+            }
+        }
+        lat.grid = unshear(std::mem::take(&mut lat.grid));
+        if let Some(window) = board_window(&lat.grid, spec) {
+            return Ok(label(&window, &lat.pts, spec, &fine));
+        }
+        if lat.grid.len() > best.grid.len() {
+            best = lat;
         }
     }
-    Err(explain(&raw, &best, &pts, spec, lo, hi))
+    Err(explain(&raw, &best.grid, &best.pts, spec, lo, hi, pts.len()))
 }
+
+/// Lattices grown (from different seeds) before the search gives up.
+const MAX_SEEDS: usize = 40;
 
 /// Orders a full lattice as the board's corners and refines them.
 fn label(grid: &HashMap<Cell, usize>, pts: &[[f64; 2]], spec: &BoardSpec, g: &Grey) -> Corners {
@@ -505,6 +725,7 @@ fn explain(
     spec: &BoardSpec,
     lo: f64,
     hi: f64,
+    candidates: usize,
 ) -> BoardError {
     if hi < 40.0 {
         return BoardError::TooDark { p99: hi };
@@ -554,5 +775,37 @@ fn explain(
     } else {
         ": board partly hidden, glare, or the wrong --board size".to_string()
     };
-    BoardError::WrongGrid { found_cols, found_rows, cols: spec.cols, rows: spec.rows, candidates: pts.len(), hint }
+    BoardError::WrongGrid { found_cols, found_rows, cols: spec.cols, rows: spec.rows, candidates, hint }
+}
+
+/// For diagnosis (`examples/board_debug.rs`): the X-junction candidates and the largest
+/// lattice grown (cell, position).
+#[doc(hidden)]
+pub fn lattice_debug(view: &ImageView<'_>, _spec: &BoardSpec) -> (Vec<[f64; 2]>, Vec<((i32, i32), [f64; 2])>) {
+    let raw = Grey::from_view(view);
+    let (lo, hi) = (raw.percentile(0.01), raw.percentile(0.99));
+    let fine = raw.blurred(0.8);
+    let min_contrast = (0.15 * (hi - lo) as f32).max(6.0);
+    let levels: Vec<Level> = LEVEL_SIGMAS.iter().map(|&s| Level::new(&raw, s)).collect();
+    let max = levels[0].resp.iter().fold(0.0f32, |m, &v| m.max(v));
+    let pts = candidates(&levels[0].grey, &levels[0].resp, max, min_contrast);
+    let search = Search { fine: &fine, levels: &levels, min_contrast };
+    let mut best: Vec<((i32, i32), [f64; 2])> = Vec::new();
+    let only: Option<[f64; 2]> = std::env::var("XSURF_BOARD_SEED").ok().and_then(|s| {
+        let (x, y) = s.split_once(',')?;
+        Some([x.parse().ok()?, y.parse().ok()?])
+    });
+    for seed in 0..pts.len() {
+        if let Some(q) = only {
+            if (0..pts.len()).any(|k| d2(pts[k], q) < d2(pts[seed], q)) {
+                continue;
+            }
+        }
+        if let Some(lat) = search.grow(&pts, seed) {
+            if lat.grid.len() > best.len() {
+                best = lat.grid.iter().map(|(&c, &k)| (c, lat.pts[k])).collect();
+            }
+        }
+    }
+    (pts, best)
 }
