@@ -190,3 +190,38 @@ fn robot_laser_line_is_found_in_every_frame_at_the_hand_labels() {
         assert!(jumps <= 6, "frame {n}: {jumps} samples off the line's course");
     }
 }
+
+/// The Ciclop's 16 calibration views (11x6 inner corners, 13 mm squares, JPEG from a C270):
+/// the board is found in every one, and the intrinsics agree with OpenCV's
+/// (`findChessboardCorners`, `cornerSubPix`, `calibrateCamera`, run here on the same files by
+/// `tests/py/ref_calibration.py`): fx and fy within 0.5 %, cx and cy within 2 px, and a
+/// reprojection RMS at most 1.2 times OpenCV's.
+#[test]
+fn ciclop_calibration_views_agree_with_opencv() {
+    use xsurf_core::calib::board::{detect, BoardSpec};
+    use xsurf_core::calib::intrinsics::{calibrate, IntrinsicsConfig};
+    let dir = realdata().join("ciclop/calibration");
+    let files: Vec<PathBuf> = (0..16).map(|k| dir.join(format!("frame{k}.jpg"))).collect();
+    let spec = BoardSpec::parse("11x6", 0.013).unwrap();
+    let views: Vec<Vec<[f64; 2]>> = files
+        .iter()
+        .map(|f| {
+            let img = read_frame(f).unwrap();
+            detect(&img.view().unwrap(), &spec).unwrap_or_else(|e| panic!("{}: {e}", f.display())).points
+        })
+        .collect();
+    let img = read_frame(&files[0]).unwrap();
+    let ours = calibrate(&spec, &views, img.width, img.height, &IntrinsicsConfig::default()).unwrap();
+    assert!(ours.views.iter().all(|v| v.rejected.is_none()), "every view used");
+    let m = &ours.model;
+    eprintln!("ours: fx {:.2} fy {:.2} cx {:.2} cy {:.2} rms {:.3} px", m.fx, m.fy, m.cx, m.cy, ours.rms_px);
+    let mut args: Vec<&Path> = vec![Path::new("11x6"), Path::new("0.013")];
+    args.extend(files.iter().map(PathBuf::as_path));
+    let Some(cv) = common::checker("ref_calibration.py", &args) else { return };
+    let f = |k: &str| cv[k].as_f64().unwrap();
+    eprintln!("OpenCV: fx {:.2} fy {:.2} cx {:.2} cy {:.2} rms {:.3} px", f("fx"), f("fy"), f("cx"), f("cy"), f("rms"));
+    assert!(cv["found"].as_object().unwrap().values().all(|v| v == true), "OpenCV finds every view: {cv}");
+    assert!((m.fx / f("fx") - 1.0).abs() < 0.005 && (m.fy / f("fy") - 1.0).abs() < 0.005, "focal lengths");
+    assert!((m.cx - f("cx")).abs() < 2.0 && (m.cy - f("cy")).abs() < 2.0, "principal point");
+    assert!(ours.rms_px <= 1.2 * f("rms"), "RMS {:.3} px against OpenCV's {:.3}", ours.rms_px, f("rms"));
+}

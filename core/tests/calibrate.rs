@@ -303,3 +303,32 @@ fn a_wide_lens_calibrates_with_the_rational_polynomial_model() {
     assert!(rms < 0.3, "mapping differs by {rms} px rms");
     assert!(worst < 1.0, "mapping differs by up to {worst} px");
 }
+
+/// The board turned a quarter, half and three quarters, in the hard look (clutter with a
+/// second checkerboard behind it, uneven light): found, and named in board order (corner `k`
+/// where the board's point `k` projects), rows and columns by the board's size, not the image's
+/// axes.
+#[test]
+fn a_turned_board_in_clutter_is_found_in_board_order() {
+    let model = study_model();
+    let rays = RayTable::new(&model);
+    let spec = spec();
+    let centre = Vec3::new(4.0 * spec.square_m, 2.5 * spec.square_m, 0.0);
+    for (k, deg) in [0.0f64, 90.0, 180.0, 270.0, 33.0].into_iter().enumerate() {
+        let rotation = xsurf_core::geom::Mat3::rot_x(0.35).mul_mat(&xsurf_core::geom::Mat3::rot_z(deg.to_radians()));
+        let pose = Iso3 { rotation, translation: Vec3::new(-0.02, 0.0, 0.55) - rotation.mul_vec(centre) };
+        let img = render_board(&rays, &pose, &spec, &BoardLook::hard(), &Exposure::hard(), 40 + k as u64);
+        let c = detect(&img.view().unwrap(), &spec).unwrap_or_else(|e| panic!("{deg} degrees: {e}"));
+        let worst = c
+            .points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let (u, v) = model.project(pose.transform_point(spec.point(i))).unwrap();
+                (p[0] - u).hypot(p[1] - v)
+            })
+            .fold(0.0, f64::max);
+        eprintln!("{deg} degrees: worst corner {worst:.3} px");
+        assert!(worst < 0.5, "{deg} degrees: a corner {worst:.2} px from where it projects");
+    }
+}

@@ -258,6 +258,30 @@ pub fn jpeg_frame(b: &[u8]) -> Result<Image, String> {
     Ok(img)
 }
 
+/// Encodes a mono8 or rgb8 frame as a baseline JPEG of `quality` (1..=100; 4:2:0 chroma for
+/// colour). Other encodings are refused.
+pub fn encode_jpeg(img: &Image, quality: u8) -> Result<Vec<u8>, String> {
+    let colour = match img.encoding {
+        Encoding::Mono8 => jpeg_encoder::ColorType::Luma,
+        Encoding::Rgb8 => jpeg_encoder::ColorType::Rgb,
+        other => return Err(format!("JPEG: {} frames are not encoded (mono8 or rgb8 only)", other.ros_name())),
+    };
+    let (w, h) = (u16::try_from(img.width), u16::try_from(img.height));
+    let (Ok(w), Ok(h)) = (w, h) else {
+        return Err(format!("JPEG: {}x{} is larger than 65535 pixels a side", img.width, img.height));
+    };
+    let mut out = Vec::with_capacity(img.data.len() / 4);
+    let encoder = jpeg_encoder::Encoder::new(&mut out, quality.clamp(1, 100));
+    encoder.encode(&img.data, w, h, colour).map_err(|e| format!("JPEG: {e}"))?;
+    Ok(out)
+}
+
+/// Writes a frame as a JPEG file of `quality`, atomically.
+pub fn write_jpeg(path: &Path, img: &Image, quality: u8) -> Result<(), crate::FileError> {
+    let bytes = encode_jpeg(img, quality).map_err(|e| crate::FileError::new(path, std::io::Error::other(e)))?;
+    crate::write_bytes_atomic(path, &bytes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -268,6 +292,33 @@ mod tests {
             *v = (i * 7 % 251) as u8;
         }
         img
+    }
+
+    #[test]
+    fn jpeg_round_trips_within_its_loss_and_refuses_what_it_cannot_encode() {
+        // A smooth scene (JPEG's best case) and a noisy one, grey and colour.
+        for enc in [Encoding::Mono8, Encoding::Rgb8] {
+            let (w, h) = (96u32, 64u32);
+            let mut img = Image::new(w, h, enc);
+            let n = enc.bytes_per_pixel();
+            for (i, v) in img.data.iter_mut().enumerate() {
+                let (x, y) = ((i / n) as u32 % w, (i / n) as u32 / w);
+                *v = (40.0 + 1.5 * f64::from(x) + 0.8 * f64::from(y) + 10.0 * ((i % n) as f64)) as u8;
+            }
+            let bytes = encode_jpeg(&img, 90).unwrap();
+            let back = jpeg_frame(&bytes).unwrap();
+            assert_eq!((back.width, back.height, back.encoding), (w, h, enc));
+            let mse =
+                img.data.iter().zip(&back.data).map(|(&a, &b)| (f64::from(a) - f64::from(b)).powi(2)).sum::<f64>()
+                    / img.data.len() as f64;
+            let psnr = 10.0 * (255.0f64 * 255.0 / mse.max(1e-9)).log10();
+            assert!(psnr > 38.0, "{enc:?}: PSNR {psnr:.1} dB at quality 90");
+            // Cut short: a named refusal, not a panic.
+            let e = jpeg_frame(&bytes[..bytes.len() / 2]).unwrap_err();
+            assert!(e.starts_with("JPEG"), "{e}");
+        }
+        let e = encode_jpeg(&Image::new(4, 4, Encoding::Mono16), 90).unwrap_err();
+        assert!(e.contains("mono16"), "{e}");
     }
 
     #[test]

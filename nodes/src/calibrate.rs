@@ -1,7 +1,7 @@
 //! `xsurf calibrate`: the technician's calibration commands (offline; no DDS participant).
 //!
 //! ```text
-//! xsurf calibrate synth DIR [--size WxH] [--board COLSxROWS] [--square M] [--views N] [--noise S] [--seed N]
+//! xsurf calibrate synth DIR [--size WxH] [--board COLSxROWS] [--square M] [--views N] [--noise S] [--seed N] [--preset ideal|hard]
 //! xsurf calibrate intrinsics IMAGE... --board COLSxROWS --square M -o CAMERA.yaml [--name NAME]
 //!       [--model plumb_bob|rational_polynomial] [--report DIR]
 //! xsurf calibrate placement [--rig RIG.yaml] -o RIG.yaml --board COLSxROWS --square M --board-origin X,Y[,Z]
@@ -27,7 +27,7 @@ use xsurf_core::geom::Vec3;
 use xsurf_core::pose::table_from_carm;
 use xsurf_core::rig::{Rig, RigCamera};
 use xsurf_core::synth::calib::{board_views, render_board, BoardLook, Exposure, RayTable};
-use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene};
+use xsurf_core::synth::{Preset, ScanSettings, Scanner, Scene};
 use xsurf_formats::calibration::{self, CameraCalibration};
 use xsurf_formats::plot::{palette, Plot, BLUE, GREY, RED};
 use xsurf_formats::write_bytes_atomic;
@@ -40,6 +40,8 @@ fn usage(msg: impl Into<String>) -> anyhow::Error {
 pub const SYNTH_TRAVELS: [f64; 3] = [-0.03, 0.0, 0.03];
 /// Tabletop heights of the synthetic laser set, metres.
 pub const SYNTH_HEIGHTS: [f64; 3] = [0.0, 0.12, 0.24];
+/// JPEG quality of the hard synthetic set's board views.
+const SYNTH_JPEG_QUALITY: u8 = 75;
 
 /// Images that share a camera and its per-image values.
 #[derive(Debug, Default)]
@@ -645,8 +647,11 @@ fn cmd_scan(args: &[String]) -> anyhow::Result<()> {
 /// `xsurf calibrate synth DIR`: a calibration set rendered from the study's rig, with the
 /// true rig and the commands that calibrate from it.
 fn synth(args: &[String]) -> anyhow::Result<()> {
-    let o = Opts::parse(args, &["--size", "--board", "--square", "--views", "--noise", "--seed"], None)?;
+    let o = Opts::parse(args, &["--size", "--board", "--square", "--views", "--noise", "--seed", "--preset"], None)?;
     let [dir] = &o.positional[..] else { return Err(usage("calibrate synth needs one output folder")) };
+    let name = o.get("--preset").unwrap_or("ideal");
+    let preset = Preset::parse(name).ok_or_else(|| usage(format!("--preset {name:?}: ideal or hard")))?;
+    let hard = preset == Preset::Hard;
     let (w, h) = match o.get("--size").unwrap_or("640x480").split_once('x') {
         Some((a, b)) => (
             a.parse::<u32>().map_err(|_| usage("--size: bad width"))?,
@@ -664,9 +669,27 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
     let noise = o.num("--noise", 2.0)?;
     let seed = o.num("--seed", 1.0)? as u64;
     let truth = Rig::study(w, h);
-    let exposure = Exposure { noise_sigma: noise, ..Exposure::default() };
-    let png = |path: &Path, img: &xsurf_core::image::Image| {
-        xsurf_formats::image::write_png(path, img.width, img.height, xsurf_formats::image::PngKind::Grey8, &img.data)
+    let exposure = if hard { Exposure::hard() } else { Exposure { noise_sigma: noise, ..Exposure::default() } };
+    let (look, table_look) = if hard {
+        (BoardLook::hard(), BoardLook { background: 0.85, ..BoardLook::hard() })
+    } else {
+        (BoardLook::default(), BoardLook { background: 0.85, ..BoardLook::default() })
+    };
+    // The hard set's board views are JPEG at quality 75, as most calibration sets are.
+    let ext = if hard { "jpg" } else { "png" };
+    let png = |path: &Path, img: &xsurf_core::image::Image| -> anyhow::Result<()> {
+        if path.extension().is_some_and(|e| e == "jpg") {
+            xsurf_formats::frames::write_jpeg(path, img, SYNTH_JPEG_QUALITY)?;
+        } else {
+            xsurf_formats::image::write_png(
+                path,
+                img.width,
+                img.height,
+                xsurf_formats::image::PngKind::Grey8,
+                &img.data,
+            )?;
+        }
+        Ok(())
     };
     for sub in ["intrinsics", "placement", "laser"] {
         std::fs::create_dir_all(dir.join(sub)).with_context(|| format!("{}", dir.join(sub).display()))?;
@@ -691,17 +714,15 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
         let rays = RayTable::new(&model);
         let poses = board_views(&model, &spec, count, seed + 1000 * ci as u64);
         for (i, pose) in poses.iter().enumerate() {
-            let img =
-                render_board(&rays, pose, &spec, &BoardLook::default(), &exposure, seed ^ ((ci * 100 + i) as u64));
-            png(&dir.join(format!("intrinsics/{}_{i:02}.png", cam.name)), &img)?;
+            let img = render_board(&rays, pose, &spec, &look, &exposure, seed ^ ((ci * 100 + i) as u64));
+            png(&dir.join(format!("intrinsics/{}_{i:02}.{ext}", cam.name)), &img)?;
         }
-        script.push_str(&format!("xsurf calibrate intrinsics $B -o {0}.yaml intrinsics/{0}_*.png\n", cam.name));
-        let look = BoardLook { background: 0.85, ..BoardLook::default() };
+        script.push_str(&format!("xsurf calibrate intrinsics $B -o {0}.yaml intrinsics/{0}_*.{ext}\n", cam.name));
         let mut names = Vec::new();
         for (i, &t) in SYNTH_TRAVELS.iter().enumerate() {
             let pose = table_from_carm(t, 0.0, 0.0).compose(&cam.carm_from_optical()).inverse().compose(&board_pose);
-            let img = render_board(&rays, &pose, &spec, &look, &exposure, seed ^ ((ci * 100 + 50 + i) as u64));
-            let name = format!("placement/{}_{i}.png", cam.name);
+            let img = render_board(&rays, &pose, &spec, &table_look, &exposure, seed ^ ((ci * 100 + 50 + i) as u64));
+            let name = format!("placement/{}_{i}.{ext}", cam.name);
             png(&dir.join(&name), &img)?;
             names.push(name);
         }
@@ -712,8 +733,9 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
             travels.join(","),
             names.join(" ")
         ));
-        let settings = ScanSettings { noise_sigma: noise, seed: seed + 77, ..ScanSettings::default() };
-        let scanner = Scanner::new(Scene::tabletop(), truth.clone(), LaserModel::default(), settings)?;
+        let mut settings = ScanSettings { noise_sigma: noise, seed: seed + 77, ..ScanSettings::default() };
+        preset.apply(&mut settings);
+        let scanner = Scanner::new(Scene::tabletop(), truth.clone(), preset.laser(), settings)?;
         let mut names = Vec::new();
         for (i, &hgt) in SYNTH_HEIGHTS.iter().enumerate() {
             let img = scanner.render_at(ci, &table_from_carm(0.0, hgt, 0.0), true, (ci * 10 + i) as u64);

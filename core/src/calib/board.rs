@@ -206,7 +206,22 @@ fn is_x_junction(g: &Grey, x: f64, y: f64, radius: f64, min_contrast: f32) -> bo
     if hi - lo < min_contrast {
         return false;
     }
-    let mid = 0.5 * (lo + hi);
+    // Bright or dark by the split of the ring's values that best separates them (Otsu's): a
+    // shadow or a gradient across the corner leaves one bright square far darker than the other.
+    let mut sorted = s;
+    sorted.sort_by(f32::total_cmp);
+    let total: f32 = sorted.iter().sum();
+    let (mut best, mut mid, mut below) = (f32::MIN, 0.5 * (lo + hi), 0.0f32);
+    for k in 1..RING_SAMPLES {
+        below += sorted[k - 1];
+        let (n0, n1) = (k as f32, (RING_SAMPLES - k) as f32);
+        let (m0, m1) = (below / n0, (total - below) / n1);
+        let between = n0 * n1 * (m1 - m0) * (m1 - m0);
+        if between > best {
+            best = between;
+            mid = 0.5 * (sorted[k - 1] + sorted[k]);
+        }
+    }
     let bits: Vec<bool> = s.iter().map(|&v| v > mid).collect();
     let Some(start) = (0..RING_SAMPLES).find(|&k| bits[k] != bits[(k + RING_SAMPLES - 1) % RING_SAMPLES]) else {
         return false;
@@ -373,7 +388,28 @@ impl Search<'_> {
             let sign = if (sq.0 + sq.1).rem_euclid(2) == 0 { lat.phase } else { -lat.phase };
             (plus - minus) * sign > thr
         };
-        segment_ok(c, pc) && segment_ok(t, pt)
+        if !(segment_ok(c, pc) && segment_ok(t, pt)) {
+            return false;
+        }
+        // Close around `t`, its four squares in the lattice's orientation: a corner of another
+        // pattern (a second board, clutter) taken for `t` is turned or scaled differently.
+        let (mut bright, mut dark) = (f64::INFINITY, f64::NEG_INFINITY);
+        for sd in [-1, 1] {
+            for se in [-1, 1] {
+                let q = [
+                    pt[0] + 0.3 * (f64::from(sd) * step[0] + f64::from(se) * perp[0]),
+                    pt[1] + 0.3 * (f64::from(sd) * step[1] + f64::from(se) * perp[1]),
+                ];
+                let v = f64::from(self.fine.sample(q[0], q[1]));
+                let sq = (t.0.min(t.0 + sd * d.0 + se * e.0), t.1.min(t.1 + sd * d.1 + se * e.1));
+                if ((sq.0 + sq.1).rem_euclid(2) == 0) == (lat.phase > 0.0) {
+                    bright = bright.min(v);
+                } else {
+                    dark = dark.max(v);
+                }
+            }
+        }
+        bright - dark > thr
     }
 
     /// The strongest X-junction within `radius` of `pred` that no candidate marks, tested at
@@ -457,10 +493,17 @@ impl Search<'_> {
                     if lat.grid.contains_key(&t) {
                         continue;
                     }
-                    let Some(pred) = predict(&lat, c, d) else { continue };
+                    let Some(mut pred) = predict(&lat, c, d) else { continue };
                     let pc = lat.pts[lat.grid[&c]];
                     let step2 = d2(pred, pc);
-                    let radius = CAPTURE * step2.sqrt();
+                    let mut radius = CAPTURE * step2.sqrt();
+                    // Where the lattice around is dense enough, its local homography predicts
+                    // far better, and a corner of another pattern near the board's edge is
+                    // off that prediction.
+                    if let Some(h) = local_homography(&lat, t) {
+                        pred = h;
+                        radius = (HOMOGRAPHY_CAPTURE * step2.sqrt()).max(1.5);
+                    }
                     let best = (0..lat.pts.len())
                         .filter(|&k| !used[k])
                         .min_by(|&x, &y| d2(lat.pts[x], pred).total_cmp(&d2(lat.pts[y], pred)))
@@ -515,6 +558,31 @@ fn predict(lat: &Lattice, c: Cell, d: Cell) -> Option<[f64; 2]> {
     }
     let n = preds.len() as f64;
     Some([preds.iter().map(|q| q[0]).sum::<f64>() / n, preds.iter().map(|q| q[1]).sum::<f64>() / n])
+}
+
+/// The fraction of the lattice step within which a corner must lie of the local homography's
+/// prediction.
+const HOMOGRAPHY_CAPTURE: f64 = 0.15;
+
+/// Where the homography fitted to the lattice's corners within two cells of `t` puts `t`;
+/// None with fewer than six such corners, or all in one row or column.
+fn local_homography(lat: &Lattice, t: Cell) -> Option<[f64; 2]> {
+    let (mut plane, mut image) = (Vec::new(), Vec::new());
+    for i in t.0 - 2..=t.0 + 2 {
+        for j in t.1 - 2..=t.1 + 2 {
+            if let Some(&k) = lat.grid.get(&(i, j)) {
+                plane.push([f64::from(i - t.0), f64::from(j - t.1)]);
+                image.push(lat.pts[k]);
+            }
+        }
+    }
+    let spans = |axis: usize| plane.iter().any(|p| p[axis] != plane[0][axis]);
+    if plane.len() < 6 || !spans(0) || !spans(1) {
+        return None;
+    }
+    let h = super::homography(&plane, &image)?;
+    let w = h[8];
+    (w.abs() > 1e-12).then(|| [h[2] / w, h[5] / w])
 }
 
 /// A lattice grown with a diagonal as one of its axes (strong foreshortening makes a diagonal
@@ -778,10 +846,14 @@ fn explain(
     BoardError::WrongGrid { found_cols, found_rows, cols: spec.cols, rows: spec.rows, candidates, hint }
 }
 
+/// A lattice corner for diagnosis: its cell and position.
+#[doc(hidden)]
+pub type DebugCorner = ((i32, i32), [f64; 2]);
+
 /// For diagnosis (`examples/board_debug.rs`): the X-junction candidates and the largest
 /// lattice grown (cell, position).
 #[doc(hidden)]
-pub fn lattice_debug(view: &ImageView<'_>, _spec: &BoardSpec) -> (Vec<[f64; 2]>, Vec<((i32, i32), [f64; 2])>) {
+pub fn lattice_debug(view: &ImageView<'_>, _spec: &BoardSpec) -> (Vec<[f64; 2]>, Vec<DebugCorner>) {
     let raw = Grey::from_view(view);
     let (lo, hi) = (raw.percentile(0.01), raw.percentile(0.99));
     let fine = raw.blurred(0.8);
@@ -790,7 +862,7 @@ pub fn lattice_debug(view: &ImageView<'_>, _spec: &BoardSpec) -> (Vec<[f64; 2]>,
     let max = levels[0].resp.iter().fold(0.0f32, |m, &v| m.max(v));
     let pts = candidates(&levels[0].grey, &levels[0].resp, max, min_contrast);
     let search = Search { fine: &fine, levels: &levels, min_contrast };
-    let mut best: Vec<((i32, i32), [f64; 2])> = Vec::new();
+    let mut best: Vec<DebugCorner> = Vec::new();
     let only: Option<[f64; 2]> = std::env::var("XSURF_BOARD_SEED").ok().and_then(|s| {
         let (x, y) = s.split_once(',')?;
         Some([x.parse().ok()?, y.parse().ok()?])

@@ -19,12 +19,48 @@ pub struct BoardLook {
     pub white: f64,
     /// Albedo of the surface around the board (in the board's plane).
     pub background: f64,
+    /// Off the board, instead of that surface, a cluttered room behind it (see [`wall_albedo`]):
+    /// a second checkerboard on a screen, a striped shirt and patches of every grey.
+    pub clutter: bool,
 }
 
 impl Default for BoardLook {
     fn default() -> Self {
-        Self { margin_squares: 0.75, black: 0.05, white: 0.85, background: 0.4 }
+        Self { margin_squares: 0.75, black: 0.05, white: 0.85, background: 0.4, clutter: false }
     }
+}
+
+impl BoardLook {
+    /// The hard set's look: a narrow border, and clutter behind the board.
+    pub fn hard() -> Self {
+        Self { margin_squares: 0.35, clutter: true, ..Self::default() }
+    }
+}
+
+/// Distance of the cluttered wall from the camera, metres (along the optical axis).
+pub const WALL_Z: f64 = 1.3;
+
+/// The cluttered wall's albedo at `(x, y)` (optical frame, metres, at z = [`WALL_Z`]): a
+/// screen showing a second checkerboard (7x5 inner corners, 45 mm squares, a dark bezel) to
+/// the right of the axis, horizontal stripes (12 mm) on the left, and 60 mm patches of random
+/// grey elsewhere.
+pub fn wall_albedo(x: f64, y: f64) -> f64 {
+    const SQ: f64 = 0.045;
+    let (x0, y0) = (0.12, -0.30);
+    let (a, b) = ((x - x0) / SQ, (y - y0) / SQ);
+    if (-0.5..8.5).contains(&a) && (-0.5..6.5).contains(&b) {
+        if (0.0..8.0).contains(&a) && (0.0..6.0).contains(&b) {
+            return if (a.floor() as i64 + b.floor() as i64) % 2 == 0 { 0.08 } else { 0.75 };
+        }
+        return 0.1; // bezel
+    }
+    if x < -0.15 {
+        return if (y / 0.012).floor().rem_euclid(2.0) == 0.0 { 0.25 } else { 0.7 };
+    }
+    let cell =
+        ((x / 0.06).floor() as i64).wrapping_mul(73_856_093) ^ ((y / 0.06).floor() as i64).wrapping_mul(19_349_663);
+    let h = SplitMix::new(cell as u64).uniform();
+    0.15 + 0.65 * h
 }
 
 /// Light, optics and sensor.
@@ -40,11 +76,36 @@ pub struct Exposure {
     pub blur_px: f64,
     /// Sub-samples per pixel side.
     pub supersample: u32,
+    /// Uneven light, 0 to 1: the light falls to `1 - uneven / 2` towards the image's left edge,
+    /// and a soft shadow across the lower right dims it by the same factor again.
+    pub uneven: f64,
 }
 
 impl Default for Exposure {
     fn default() -> Self {
-        Self { level: 215.0, vignetting: 0.25, noise_sigma: 2.0, blur_px: 0.0, supersample: 4 }
+        Self { level: 215.0, vignetting: 0.25, noise_sigma: 2.0, blur_px: 0.0, supersample: 4, uneven: 0.0 }
+    }
+}
+
+impl Exposure {
+    /// The hard set's light: uneven (a gradient and a shadow, down to a quarter of the light),
+    /// a slightly soft lens, and more sensor noise.
+    pub fn hard() -> Self {
+        Self { uneven: 1.0, blur_px: 0.7, noise_sigma: 3.0, ..Self::default() }
+    }
+    /// The light's factor at pixel `(x, y)` of a `w x h` image from the gradient and the shadow.
+    fn uneven_at(&self, x: f64, y: f64, w: f64, h: f64) -> f64 {
+        if self.uneven <= 0.0 {
+            return 1.0;
+        }
+        let k = 0.5 * self.uneven;
+        let gradient = 1.0 - k * (1.0 - x / w);
+        // The shadow's edge runs from (0.35 w, h) to (w, 0.45 h); soft over about 8 pixels.
+        let (ax, ay, bx, by) = (0.35 * w, h, w, 0.45 * h);
+        let side = ((bx - ax) * (y - ay) - (by - ay) * (x - ax)) / (bx - ax).hypot(by - ay);
+        let s = (0.5 + side / 16.0).clamp(0.0, 1.0);
+        let shade = 1.0 - k * s * s * (3.0 - 2.0 * s);
+        gradient * shade
     }
 }
 
@@ -87,20 +148,17 @@ impl RayTable {
     }
 }
 
-fn board_albedo(spec: &BoardSpec, look: &BoardLook, x: f64, y: f64) -> f64 {
+/// The board's albedo at `(x, y)` in its frame; None off the printed board.
+fn board_albedo(spec: &BoardSpec, look: &BoardLook, x: f64, y: f64) -> Option<f64> {
     let s = spec.square_m;
     let (a, b) = ((x / s).floor(), (y / s).floor());
     let inside_squares = a >= -1.0 && b >= -1.0 && a <= spec.cols as f64 - 1.0 && b <= spec.rows as f64 - 1.0;
     if inside_squares {
-        return if BoardSpec::square_is_black(a as i64, b as i64) { look.black } else { look.white };
+        return Some(if BoardSpec::square_is_black(a as i64, b as i64) { look.black } else { look.white });
     }
     let m = (1.0 + look.margin_squares) * s;
     let on_board = x >= -m && y >= -m && x <= (spec.cols as f64 - 1.0) * s + m && y <= (spec.rows as f64 - 1.0) * s + m;
-    if on_board {
-        look.white
-    } else {
-        look.background
-    }
+    on_board.then_some(look.white)
 }
 
 /// Renders the board at `optical_from_board` (mono8).
@@ -135,16 +193,25 @@ pub fn render_board(
                             let d = rays.ray(u, v);
                             let den = normal.dot(d);
                             let t = if den.abs() > 1e-12 { normal.dot(origin) / den } else { -1.0 };
-                            acc += if t > 0.0 {
+                            let albedo = if t > 0.0 {
                                 let p = board_from_optical.transform_point(d * t);
                                 board_albedo(spec, look, p.x, p.y)
                             } else {
-                                look.background
+                                None
                             };
+                            acc += albedo.unwrap_or_else(|| {
+                                if look.clutter {
+                                    wall_albedo(d.x / d.z * WALL_Z, d.y / d.z * WALL_Z)
+                                } else {
+                                    look.background
+                                }
+                            });
                         }
                     }
                     let (dx, dy) = ((x as f64 - m.cx) / w as f64, (y as f64 - m.cy) / h as f64);
-                    let light = exposure.level * (1.0 - exposure.vignetting * 2.0 * (dx * dx + dy * dy));
+                    let light = exposure.level
+                        * (1.0 - exposure.vignetting * 2.0 * (dx * dx + dy * dy))
+                        * exposure.uneven_at(x as f64, y as f64, w as f64, h as f64);
                     *out = light * acc / (n * n) as f64;
                 }
             });

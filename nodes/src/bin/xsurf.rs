@@ -39,6 +39,7 @@ const USAGE: &str = "usage:
   xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
       a node's parameters through the standard ROS 2 parameter services (like `ros2 param`)
   xsurf calibrate synth DIR [--size WxH] [--board COLSxROWS] [--square M] [--views N] [--noise S] [--seed N]
+                        [--preset ideal|hard]
       render a calibration set with known truth (board views, board on the tabletop, laser at 3 heights)
       and DIR/calibrate.sh, the commands below that calibrate from it
   xsurf calibrate intrinsics IMAGE... --board COLSxROWS --square M -o CAMERA.yaml [--name N]
