@@ -110,3 +110,74 @@ fn checker_write(dst: &std::path::Path) -> Option<()> {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     Some(())
 }
+
+/// CompressedImage written by Python (rosbags' Writer, the bytes by Pillow: JPEG for cam1, PNG
+/// for cam2, image_transport's format strings): decoded by us to the pixels Pillow decodes
+/// (PNG exactly; JPEG within the rounding of two IDCTs), and the bag reconstructs.
+#[test]
+fn compressed_images_written_by_python_decode_to_pillows_pixels() {
+    use xsurf_msgs::sensor_msgs::CompressedImage;
+    let dir = scratch("py-compressed");
+    let bag = dir.join("bag");
+    let Some(py) = python() else { return };
+    let out = std::process::Command::new(py)
+        .arg(root().join("tests/py/rosbags_compressed.py"))
+        .arg(pyramid_bag())
+        .arg(&bag)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let index: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(bag.join("pillow/index.json")).unwrap()).unwrap();
+    let frames = index.as_array().unwrap();
+    assert_eq!(frames.len(), 6);
+    let ours = Bag::open(&bag).unwrap();
+    let mut compared = 0;
+    for m in ours.messages() {
+        let m = m.unwrap();
+        let Some(cam) = m.topic.strip_suffix("/image_raw/compressed") else { continue };
+        let c: CompressedImage = cdr::decode(&m.data).unwrap();
+        let stamp = c.header.stamp.nanos();
+        let Some(f) =
+            frames.iter().find(|f| f["stamp_ns"].as_i64() == Some(stamp) && f["camera"] == cam.trim_start_matches('/'))
+        else {
+            continue;
+        };
+        assert_eq!(c.format, f["format"].as_str().unwrap());
+        let img = xsurf_formats::compressed::decode(&c.format, &c.data).unwrap();
+        let pillow = std::fs::read(bag.join("pillow").join(f["file"].as_str().unwrap())).unwrap();
+        assert_eq!((img.width, img.height), (320, 240));
+        assert_eq!(img.data.len(), pillow.len());
+        let diffs: Vec<i32> =
+            img.data.iter().zip(&pillow).map(|(&a, &b)| (i32::from(a) - i32::from(b)).abs()).collect();
+        let max = diffs.iter().copied().max().unwrap_or(0);
+        let same = diffs.iter().filter(|&&d| d == 0).count() as f64 / diffs.len() as f64;
+        eprintln!("{cam} {}: max difference {max}, {:.2} % identical", c.format, 100.0 * same);
+        if c.format.contains("png") {
+            assert_eq!(max, 0, "PNG decodes exactly");
+        } else {
+            assert!(max <= 1 && same > 0.95, "JPEG: max difference {max}, {:.2} % identical", 100.0 * same);
+        }
+        compared += 1;
+    }
+    assert_eq!(compared, 6);
+    let out_dir = dir.join("out");
+    let params = pyramid_bag().join("params.yaml");
+    let out = xsurf(&[
+        "reconstruct",
+        bag.to_str().unwrap(),
+        "--params-file",
+        params.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("report.json")).unwrap()).unwrap();
+    assert!(
+        report["points"]["cam1"].as_u64().unwrap() > 10_000 && report["points"]["cam2"].as_u64().unwrap() > 10_000,
+        "{report}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -145,18 +145,40 @@ fn node_executables_refuse_bad_input_with_exit_2() {
 }
 
 /// `xsurf bag record` while `xsurf bag play` publishes a synthetic scan: every message of every
-/// topic comes back, in order, byte for byte, with the QoS of its class.
+/// topic comes back, in order, byte for byte, with the QoS of its class; the same for a scan
+/// whose cameras are `sensor_msgs/CompressedImage` (JPEG) on `/<cam>/image_raw/compressed`.
 #[test]
 fn record_then_play_round_trips_every_message() {
+    let out = scratch("record-play");
+    let compressed = out.join("compressed-src");
+    let made = xsurf(&[
+        "synth",
+        "pyramid",
+        "-o",
+        compressed.to_str().unwrap(),
+        "--size",
+        "320x240",
+        "--speed",
+        "0.14",
+        "--compressed",
+        "jpeg",
+    ]);
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    for (k, src_bag) in [pyramid_bag(), compressed.as_path()].into_iter().enumerate() {
+        record_and_play(src_bag, &out.join(format!("run{k}")));
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+fn record_and_play(src_bag: &std::path::Path, out: &std::path::Path) {
     let netns = root().join("../shared/tools/netns-run");
     assert!(netns.is_file());
-    let out = scratch("record-play");
     let rec = out.join("rec");
     let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
     let run = Command::new(&netns)
         .arg(root().join("tests/record_play.sh"))
         .arg(bin_dir)
-        .arg(pyramid_bag())
+        .arg(src_bag)
         .arg(&rec)
         .arg(out.join("logs"))
         .output()
@@ -172,7 +194,7 @@ fn record_then_play_round_trips_every_message() {
         }
         m
     };
-    let (src, got) = (by_topic(pyramid_bag()), by_topic(&rec));
+    let (src, got) = (by_topic(src_bag), by_topic(&rec));
     for (topic, msgs) in &src {
         let g = got.get(topic).unwrap_or_else(|| panic!("{topic} not recorded\n{}", log("record.log")));
         assert_eq!(g.len(), msgs.len(), "{topic}: {} of {} messages", g.len(), msgs.len());
@@ -180,12 +202,13 @@ fn record_then_play_round_trips_every_message() {
     }
     let meta = xsurf_formats::bag::Bag::open(&rec).unwrap().metadata;
     let q = |t: &str| meta.topics.iter().find(|x| x.name == t).and_then(|x| x.qos).unwrap();
-    assert!(!q("/cam1/image_raw").reliable && q("/tf_static").transient_local && q("/tf").reliable);
+    let images = meta.topics.iter().find(|t| t.name.starts_with("/cam1/image_raw")).unwrap();
+    assert!(!q(&images.name).reliable && q("/tf_static").transient_local && q("/tf").reliable);
     // The recorded bag is read by the independent readers too.
     if let Some(j) = checker("check_bag.py", &[&rec]) {
         assert_eq!(j["agree"], true, "{j}");
+        assert_eq!(j["rosbags_counts"][&images.name].as_u64(), Some(images.message_count), "{j}");
     }
-    std::fs::remove_dir_all(&out).unwrap();
 }
 
 /// Runs `tests/py/rviz_standin.py MODE` in the network namespace; returns its summary and the

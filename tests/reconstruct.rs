@@ -409,3 +409,149 @@ fn calibrate_scan_refines_the_rig_from_a_scan_and_leaves_it_alone_when_refused()
     assert_eq!(std::fs::read(&wild_rig).unwrap(), before, "the rig is untouched");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The pyramid bag with cam1's images also (or only) as `sensor_msgs/CompressedImage` JPEG on
+/// `/cam1/image_raw/compressed`; `damage` may spoil the k-th compressed message.
+fn with_compressed_cam1(
+    dst: &Path,
+    keep_raw: bool,
+    mut damage: impl FnMut(usize, &mut xsurf_msgs::sensor_msgs::CompressedImage),
+) {
+    use xsurf_msgs::sensor_msgs::{CompressedImage, Image};
+    use xsurf_msgs::RosMessage;
+    let bag = Bag::open(pyramid_bag()).unwrap();
+    let mut w = BagWriter::create(dst, BagOptions::default()).unwrap();
+    for t in &bag.metadata.topics {
+        if t.name != "/cam1/image_raw" || keep_raw {
+            w.add_topic(
+                &t.name,
+                &t.type_name,
+                &Msg::definition(&t.type_name).unwrap(),
+                &t.qos.unwrap_or(Qos::RELIABLE),
+            )
+            .unwrap();
+        }
+    }
+    w.add_topic("/cam1/image_raw/compressed", CompressedImage::TYPE_NAME, &CompressedImage::definition(), &Qos::SENSOR)
+        .unwrap();
+    let mut k = 0;
+    for m in bag.messages() {
+        let m = m.unwrap();
+        if m.topic == "/cam1/image_raw" {
+            let img: Image = xsurf_msgs::cdr::decode(&m.data).unwrap();
+            let encoding = xsurf_core::image::Encoding::from_ros(&img.encoding).unwrap();
+            assert_eq!(img.step as usize, img.width as usize * encoding.bytes_per_pixel());
+            let frame =
+                xsurf_core::image::Image { width: img.width, height: img.height, encoding, data: img.data.clone() };
+            let (format, data) =
+                xsurf_formats::compressed::encode(&frame, xsurf_formats::compressed::Codec::Jpeg, 90).unwrap();
+            let mut c = CompressedImage { header: img.header.clone(), format, data };
+            damage(k, &mut c);
+            k += 1;
+            let bytes = xsurf_msgs::cdr::encode(&c).unwrap();
+            w.write("/cam1/image_raw/compressed", m.log_time_ns, m.publish_time_ns, &bytes).unwrap();
+            if !keep_raw {
+                continue;
+            }
+        }
+        w.write(&m.topic, m.log_time_ns, m.publish_time_ns, &m.data).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn compressed_cameras_reconstruct_like_their_raw_twin() {
+    // The same scan rendered twice, once recorded as JPEG (quality 90) CompressedImage.
+    let dir = scratch("compressed");
+    let (raw, jpeg) = (dir.join("raw"), dir.join("jpeg"));
+    for (bag, extra) in [(&raw, &[][..]), (&jpeg, &["--compressed", "jpeg"][..])] {
+        let mut args = vec!["synth", "pyramid", "-o", bag.to_str().unwrap(), "--size", "320x240", "--speed", "0.14"];
+        args.extend_from_slice(extra);
+        let out = xsurf(&args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    }
+    let info = Bag::open(&jpeg).unwrap();
+    assert!(info.metadata.topics.iter().any(|t| t.name == "/cam2/image_raw/compressed"));
+    assert!(!info.metadata.topics.iter().any(|t| t.name.ends_with("/image_raw")));
+    let mut rms = Vec::new();
+    for bag in [&raw, &jpeg] {
+        let out_dir = bag.with_extension("out");
+        let out = reconstruct(bag, &out_dir);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out_dir.join("report.json")).unwrap()).unwrap();
+        rms.push((pyramid_rms_mm(&out_dir.join("merged.ply")), report["merged_points"].as_u64().unwrap(), report));
+    }
+    let ((raw_rms, raw_points, _), (jpeg_rms, jpeg_points, report)) = (&rms[0], &rms[1]);
+    eprintln!("raw: {raw_rms:.4} mm, {raw_points} points; jpeg q90: {jpeg_rms:.4} mm, {jpeg_points} points");
+    assert_eq!(report["frames_read"]["cam1"], report["frames_read"]["cam2"]);
+    assert!(report["frames_read"]["cam1"].as_u64().unwrap() > 50, "{report}");
+    // Within the JPEG noise: the same accuracy against the truth to 0.05 mm, nearly every point.
+    assert!(*jpeg_rms < raw_rms + 0.05, "JPEG {jpeg_rms:.3} mm against raw {raw_rms:.3} mm");
+    assert!((*jpeg_points as f64) > 0.98 * *raw_points as f64, "{jpeg_points} points against {raw_points}");
+    // Read in full by the independent readers.
+    if let Some(v) = checker("check_bag.py", &[&jpeg]) {
+        assert_eq!(v["agree"], true, "{v}");
+        assert_eq!(
+            v["rosbags_counts"]["/cam1/image_raw/compressed"],
+            v["metadata_counts"]["/cam1/image_raw/compressed"]
+        );
+        assert_eq!(v["mcap_counts"]["/cam2/image_raw/compressed"], v["metadata_counts"]["/cam2/image_raw/compressed"]);
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn both_transports_for_one_camera_must_be_chosen_between() {
+    let dir = scratch("both-transports");
+    let b = dir.join("b");
+    with_compressed_cam1(&b, true, |_, _| {});
+    let out = reconstruct(&b, &dir.join("o"));
+    assert_clean_failure(&out, 1, "camera cam1: the bag holds both /cam1/image_raw and /cam1/image_raw/compressed");
+    // Chosen by parameter: the compressed stream, read once.
+    let params = dir.join("params.yaml");
+    let base = std::fs::read_to_string(pyramid_bag().join("params.yaml")).unwrap();
+    std::fs::write(
+        &params,
+        format!("{base}\n/cam1/edge_detector:\n  ros__parameters:\n    image_transport: compressed\n"),
+    )
+    .unwrap();
+    let out = xsurf(&[
+        "reconstruct",
+        b.to_str().unwrap(),
+        "--params-file",
+        params.to_str().unwrap(),
+        "--out",
+        dir.join("o").to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("o/report.json")).unwrap()).unwrap();
+    assert_eq!(report["frames_read"]["cam1"], report["frames_read"]["cam2"], "{report}");
+    assert!(report["unused_topics"].as_array().unwrap().iter().any(|t| t == "/cam1/image_raw"), "{report}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_bad_compressed_image_is_refused_by_name_counted_and_costs_only_itself() {
+    let dir = scratch("bad-compressed");
+    let b = dir.join("b");
+    with_compressed_cam1(&b, false, |k, c| match k {
+        20 => c.data.truncate(c.data.len() / 3),
+        21 => c.format = "png".into(),
+        22 => c.format = "bgr8; tiff compressed bgr8".into(),
+        _ => {}
+    });
+    let out = reconstruct(&b, &dir.join("o"));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.contains("compressed image at") && err.contains("JPEG"), "{err}");
+    assert!(err.contains("says png but the") && err.contains("bytes are jpeg"), "{err}");
+    assert!(err.contains("codec \"tiff\" is not read"), "{err}");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("o/report.json")).unwrap()).unwrap();
+    let node = report["nodes"].as_array().unwrap().iter().find(|n| n["node"] == "/cam1/edge_detector").unwrap();
+    assert_eq!(node["counters"]["bad_images"], 3, "{node}");
+    assert_eq!(node["counters"]["frames"].as_u64().unwrap() + 3, node["messages"].as_u64().unwrap(), "{node}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -163,7 +163,8 @@ fn pnm(b: &[u8]) -> Result<Image, String> {
     Ok(img)
 }
 
-fn png_frame(b: &[u8]) -> Result<Image, String> {
+/// Decodes a PNG (grey or colour, 8 or 16 bits grey; alpha dropped) into a frame.
+pub fn png_frame(b: &[u8]) -> Result<Image, String> {
     let mut dec = png::Decoder::new(std::io::Cursor::new(b));
     dec.set_transformations(png::Transformations::EXPAND);
     let mut reader = dec.read_info().map_err(|e| e.to_string())?;

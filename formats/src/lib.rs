@@ -9,6 +9,7 @@
 
 pub mod bag;
 pub mod calibration;
+pub mod compressed;
 pub mod dicom;
 pub mod frames;
 pub mod gltf;

@@ -106,8 +106,35 @@ pub fn peak_rss_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
-const USED_TYPES: &[(&str, &str)] =
-    &[("image_raw", "sensor_msgs/msg/Image"), ("camera_info", "sensor_msgs/msg/CameraInfo")];
+/// Per-camera topics a reconstruction needs besides the images.
+const USED_TYPES: &[(&str, &str)] = &[("camera_info", "sensor_msgs/msg/CameraInfo")];
+
+/// The transport a camera's edge detector reads from a bag: the one the bag holds, or, where it
+/// holds both, the one the `image_transport` parameter chooses (an error without it: the frames
+/// would be read twice).
+fn image_transport(
+    cam: &str,
+    in_bag: &[&str],
+    overrides: &BTreeMap<String, ParamValue>,
+) -> anyhow::Result<&'static str> {
+    let chosen = match overrides.get("image_transport") {
+        None => None,
+        Some(ParamValue::String(s)) if s == "raw" => Some("raw"),
+        Some(ParamValue::String(s)) if s == "compressed" => Some("compressed"),
+        Some(v) => bail!("parameter /{cam}/edge_detector image_transport: {v:?} is not raw or compressed"),
+    };
+    let topic = |t: &str| if t == "raw" { format!("/{cam}/image_raw") } else { format!("/{cam}/image_raw/compressed") };
+    match (chosen, in_bag) {
+        (Some(c), _) if in_bag.contains(&c) => Ok(c),
+        (Some(c), _) => bail!("camera {cam}: image_transport {c} chosen, but the bag has no {}", topic(c)),
+        (None, [only]) => Ok(if *only == "raw" { "raw" } else { "compressed" }),
+        (None, _) => bail!(
+            "camera {cam}: the bag holds both {} and {}; choose one with the parameter image_transport (raw or compressed) of /{cam}/edge_detector in --params-file",
+            topic("raw"),
+            topic("compressed")
+        ),
+    }
+}
 
 /// Runs the reconstruction and writes the files and `report.json`.
 pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
@@ -116,27 +143,32 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     let meta = &bag.metadata;
     let topic_type: BTreeMap<&str, &str> =
         meta.topics.iter().map(|t| (t.name.as_str(), t.type_name.as_str())).collect();
-    // Cameras: namespaces of /<cam>/image_raw.
-    let mut cameras = Vec::new();
+    // Cameras: namespaces of /<cam>/image_raw and /<cam>/image_raw/compressed.
+    let mut cameras: Vec<String> = Vec::new();
+    let mut transports: BTreeMap<String, Vec<&str>> = BTreeMap::new();
     for t in &meta.topics {
-        if let Some(ns) = t.name.strip_suffix("/image_raw") {
-            let cam = ns.trim_start_matches('/');
-            if cam.is_empty() || cam.contains('/') {
-                bail!("topic {}: expected /<camera>/image_raw", t.name);
-            }
-            if t.type_name != "sensor_msgs/msg/Image" {
-                bail!(
-                    "topic {} has type {}, expected sensor_msgs/msg/Image (compressed images are not handled)",
-                    t.name,
-                    t.type_name
-                );
-            }
+        let (ns, transport, ty) = if let Some(ns) = t.name.strip_suffix("/image_raw/compressed") {
+            (ns, "compressed", "sensor_msgs/msg/CompressedImage")
+        } else if let Some(ns) = t.name.strip_suffix("/image_raw") {
+            (ns, "raw", "sensor_msgs/msg/Image")
+        } else {
+            continue;
+        };
+        let cam = ns.trim_start_matches('/');
+        if cam.is_empty() || cam.contains('/') {
+            bail!("topic {}: expected /<camera>/image_raw or /<camera>/image_raw/compressed", t.name);
+        }
+        if t.type_name != ty {
+            bail!("topic {} has type {}, expected {ty}", t.name, t.type_name);
+        }
+        if !cameras.iter().any(|c| c == cam) {
             cameras.push(cam.to_string());
         }
+        transports.entry(cam.to_string()).or_default().push(transport);
     }
     if cameras.is_empty() {
         bail!(
-            "{}: no /<camera>/image_raw topic in the bag (topics: {})",
+            "{}: no /<camera>/image_raw (or image_raw/compressed) topic in the bag (topics: {})",
             opts.bag.display(),
             meta.topics.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ")
         );
@@ -196,9 +228,14 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     };
     for cam in &cameras {
         let ns = format!("/{cam}");
-        for node in ["edge_detector", "triangulator"] {
-            router.add(build(node, &ns, &[])?, node, &ns, &ros.remaps);
-        }
+        let transport = image_transport(cam, &transports[cam], &ros.param_overrides(&fq_name(&ns, "edge_detector"))?)?;
+        router.add(
+            build("edge_detector", &ns, &[("image_transport", ParamValue::String(transport.into()))])?,
+            "edge_detector",
+            &ns,
+            &ros.remaps,
+        );
+        router.add(build("triangulator", &ns, &[])?, "triangulator", &ns, &ros.remaps);
         router.add(
             build("mesher", &ns, &[("output_dir", ParamValue::String(out_dir.clone()))])?,
             "mesher",
@@ -258,7 +295,13 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     };
     let total_images: u64 = cameras
         .iter()
-        .map(|c| meta.topics.iter().find(|t| t.name == format!("/{c}/image_raw")).map_or(0, |t| t.message_count))
+        .map(|c| {
+            let topic = match router.has_subscriber(&format!("/{c}/image_raw/compressed")) {
+                true => format!("/{c}/image_raw/compressed"),
+                false => format!("/{c}/image_raw"),
+            };
+            meta.topics.iter().find(|t| t.name == topic).map_or(0, |t| t.message_count)
+        })
         .sum();
     let tty = opts.progress && std::io::stderr().is_terminal();
     let mut images = 0u64;
@@ -288,7 +331,8 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             }
         };
         read_s += t_dec.elapsed().as_secs_f64();
-        if let Some(cam) = m.topic.strip_suffix("/image_raw") {
+        if let Some(cam) = m.topic.strip_suffix("/image_raw").or_else(|| m.topic.strip_suffix("/image_raw/compressed"))
+        {
             images += 1;
             *report.frames_read.entry(cam.trim_start_matches('/').to_string()).or_default() += 1;
         }

@@ -28,7 +28,10 @@ pub struct RecordOptions {
 fn class_of(topic: &str, type_name: &str) -> QosClass {
     if topic == "/tf_static" {
         QosClass::Static
-    } else if type_name == "sensor_msgs/msg/Image" || type_name == "sensor_msgs/msg/CameraInfo" {
+    } else if matches!(
+        type_name,
+        "sensor_msgs/msg/Image" | "sensor_msgs/msg/CompressedImage" | "sensor_msgs/msg/CameraInfo"
+    ) {
         QosClass::Sensor
     } else {
         QosClass::Reliable

@@ -11,7 +11,8 @@ use std::path::Path;
 use xsurf_core::mesh::Mesh;
 use xsurf_core::synth::Scanner;
 use xsurf_formats::bag::{BagOptions, BagWriter, Qos};
-use xsurf_msgs::sensor_msgs::{CameraInfo, Image, JointState};
+use xsurf_formats::compressed::{encode, Codec};
+use xsurf_msgs::sensor_msgs::{CameraInfo, CompressedImage, Image, JointState};
 use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::{cdr, RosMessage};
@@ -49,18 +50,31 @@ fn put<M: RosMessage>(w: &mut BagWriter, topic: &str, t: i64, m: &M) -> anyhow::
 }
 
 /// Renders `scanner`'s scan into the bag directory `dir` (which must not exist or be empty).
-/// `min_ray_plane_angle_deg` is the triangulator's, so the truth matches what can be observed.
+/// The cameras' images are `sensor_msgs/Image` on `/<cam>/image_raw`, or with `compressed`
+/// (codec, JPEG quality) `sensor_msgs/CompressedImage` on `/<cam>/image_raw/compressed`, as
+/// image_transport's compressed plugin records them.
 pub fn write_bag(
     dir: &Path,
     scanner: &Scanner,
     zstd: bool,
     scan_id: u32,
+    compressed: Option<(Codec, u8)>,
     mut progress: impl FnMut(u32, u32),
 ) -> anyhow::Result<SynthSummary> {
     let rig = &scanner.rig;
     let mut w = BagWriter::create(dir, BagOptions { zstd })?;
     for c in &rig.cameras {
-        w.add_topic(&format!("/{}/image_raw", c.name), Image::TYPE_NAME, &Image::definition(), &Qos::SENSOR)?;
+        match compressed {
+            None => {
+                w.add_topic(&format!("/{}/image_raw", c.name), Image::TYPE_NAME, &Image::definition(), &Qos::SENSOR)?
+            }
+            Some(_) => w.add_topic(
+                &format!("/{}/image_raw/compressed", c.name),
+                CompressedImage::TYPE_NAME,
+                &CompressedImage::definition(),
+                &Qos::SENSOR,
+            )?,
+        }
         w.add_topic(
             &format!("/{}/camera_info", c.name),
             CameraInfo::TYPE_NAME,
@@ -135,8 +149,15 @@ pub fn write_bag(
                         t,
                         &convert::camera_info(&models[ci], header.clone()),
                     )?;
-                    let img = Image::from_image(header, scanner.render(ci, f));
-                    put(&mut w, &format!("/{}/image_raw", c.name), t, &img)?;
+                    let frame = scanner.render(ci, f);
+                    match compressed {
+                        None => put(&mut w, &format!("/{}/image_raw", c.name), t, &Image::from_image(header, frame))?,
+                        Some((codec, quality)) => {
+                            let (format, data) = encode(&frame, codec, quality).map_err(anyhow::Error::msg)?;
+                            let m = CompressedImage { header, format, data };
+                            put(&mut w, &format!("/{}/image_raw/compressed", c.name), t, &m)?;
+                        }
+                    }
                 }
                 progress(f + 1, n);
             }

@@ -4,9 +4,9 @@
 use crate::params::{ParamDecl, ParamError, Params};
 use std::sync::Arc;
 use xsurf_msgs::{
-    cdr, rosgraph_msgs::Clock, sensor_msgs::CameraInfo, sensor_msgs::Image, sensor_msgs::JointState,
-    sensor_msgs::PointCloud2, tf2_msgs::TFMessage, visualization_msgs::Marker, xsurf_msgs::LaserLine,
-    xsurf_msgs::ScanEvent, RosMessage,
+    cdr, rosgraph_msgs::Clock, sensor_msgs::CameraInfo, sensor_msgs::CompressedImage, sensor_msgs::Image,
+    sensor_msgs::JointState, sensor_msgs::PointCloud2, tf2_msgs::TFMessage, visualization_msgs::Marker,
+    xsurf_msgs::LaserLine, xsurf_msgs::ScanEvent, RosMessage,
 };
 
 /// A message on a topic; shared so that fan-out copies nothing.
@@ -14,6 +14,8 @@ use xsurf_msgs::{
 pub enum Msg {
     /// `sensor_msgs/msg/Image`.
     Image(Arc<Image>),
+    /// `sensor_msgs/msg/CompressedImage` (image_transport's `compressed` plugin).
+    CompressedImage(Arc<CompressedImage>),
     /// `sensor_msgs/msg/CameraInfo`.
     CameraInfo(Arc<CameraInfo>),
     /// `tf2_msgs/msg/TFMessage` (on `/tf` or `/tf_static`).
@@ -80,6 +82,7 @@ macro_rules! msg_types {
                     Msg::Tf(m) => m.transforms.first().map(|t| t.header.stamp.nanos()),
                     Msg::Clock(_) => None,
                     Msg::Image(m) => Some(m.header.stamp.nanos()),
+                    Msg::CompressedImage(m) => Some(m.header.stamp.nanos()),
                     Msg::CameraInfo(m) => Some(m.header.stamp.nanos()),
                     Msg::LaserLine(m) => Some(m.header.stamp.nanos()),
                     Msg::Cloud(m) => Some(m.header.stamp.nanos()),
@@ -96,6 +99,7 @@ macro_rules! msg_types {
 
 msg_types! {
     Image => Image,
+    CompressedImage => CompressedImage,
     CameraInfo => CameraInfo,
     Tf => TFMessage,
     LaserLine => LaserLine,

@@ -25,9 +25,9 @@ use std::sync::mpsc::{sync_channel, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use xsurf_msgs::{
-    rosgraph_msgs::Clock, sensor_msgs::CameraInfo, sensor_msgs::Image, sensor_msgs::JointState,
-    sensor_msgs::PointCloud2, tf2_msgs::TFMessage, visualization_msgs::Marker, xsurf_msgs::LaserLine,
-    xsurf_msgs::ScanEvent,
+    rosgraph_msgs::Clock, sensor_msgs::CameraInfo, sensor_msgs::CompressedImage, sensor_msgs::Image,
+    sensor_msgs::JointState, sensor_msgs::PointCloud2, tf2_msgs::TFMessage, visualization_msgs::Marker,
+    xsurf_msgs::LaserLine, xsurf_msgs::ScanEvent,
 };
 
 /// Messages waiting for the component, at most.
@@ -162,6 +162,7 @@ fn topic_name(full: &str) -> Result<Name, HostError> {
 /// A typed publisher for one output.
 enum Pub {
     Image(ros2_client::Publisher<Image>),
+    CompressedImage(ros2_client::Publisher<CompressedImage>),
     CameraInfo(ros2_client::Publisher<CameraInfo>),
     Tf(ros2_client::Publisher<TFMessage>),
     LaserLine(ros2_client::Publisher<LaserLine>),
@@ -177,6 +178,7 @@ impl Pub {
     fn gid(&self) -> ros2_client::Gid {
         match self {
             Pub::Image(p) => p.gid(),
+            Pub::CompressedImage(p) => p.gid(),
             Pub::CameraInfo(p) => p.gid(),
             Pub::Tf(p) => p.gid(),
             Pub::LaserLine(p) => p.gid(),
@@ -190,6 +192,9 @@ impl Pub {
     fn publish(&self, m: &Msg) -> Result<(), String> {
         match (self, m) {
             (Pub::Image(p), Msg::Image(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
+            (Pub::CompressedImage(p), Msg::CompressedImage(m)) => {
+                p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}"))
+            }
             (Pub::CameraInfo(p), Msg::CameraInfo(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
             (Pub::Tf(p), Msg::Tf(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
             (Pub::LaserLine(p), Msg::LaserLine(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
@@ -233,6 +238,7 @@ impl DdsNode {
         let err = |e: ros2_client::CreateError| HostError::Dds(format!("publisher {topic}: {e:?}"));
         let p = match type_name_full {
             "sensor_msgs/msg/Image" => Pub::Image(self.node.create_publisher(&t, q).map_err(err)?),
+            "sensor_msgs/msg/CompressedImage" => Pub::CompressedImage(self.node.create_publisher(&t, q).map_err(err)?),
             "sensor_msgs/msg/CameraInfo" => Pub::CameraInfo(self.node.create_publisher(&t, q).map_err(err)?),
             "tf2_msgs/msg/TFMessage" => Pub::Tf(self.node.create_publisher(&t, q).map_err(err)?),
             "xsurf_msgs/msg/LaserLine" => Pub::LaserLine(self.node.create_publisher(&t, q).map_err(err)?),
@@ -319,6 +325,9 @@ fn subscribe(
     }
     match type_full {
         "sensor_msgs/msg/Image" => spawn_reader!(Image, |m| Event::Message(index, Msg::Image(Arc::new(m)))),
+        "sensor_msgs/msg/CompressedImage" => {
+            spawn_reader!(CompressedImage, |m| Event::Message(index, Msg::CompressedImage(Arc::new(m))))
+        }
         "sensor_msgs/msg/CameraInfo" => {
             spawn_reader!(CameraInfo, |m| Event::Message(index, Msg::CameraInfo(Arc::new(m))))
         }

@@ -26,8 +26,11 @@ const USAGE: &str = "usage:
   xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S] [--preset ideal|hard] [--encoding E]
       synthesize a scan, reconstruct it, write the files and report the accuracy (default out: ./xsurf-demo)
   xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--preset ideal|hard] [--zstd] [--frames N]
+             [--compressed jpeg|png [--jpeg-quality Q]]
       write a synthetic scan as a rosbag2 bag plus its ground truth and radiograph (scenes: pyramid, phantom,
-      sphere, cylinder, box, body); with --frames N, N frames per camera as PGM files instead (DIR/<camera>/)
+      sphere, cylinder, box, body); with --compressed the cameras are sensor_msgs/CompressedImage on
+      /<cam>/image_raw/compressed (JPEG quality default 90); with --frames N, N frames per camera as PGM files
+      instead (DIR/<camera>/)
   xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
       reconstruct a recorded scan offline: DIR/<cam>.ply, merged.ply, scene.wrl, scene.glb, report.json
   xsurf bag info DIR
@@ -166,8 +169,35 @@ fn cmd_synth(args: &[String]) -> anyhow::Result<()> {
     let a = Args::parse(
         args,
         &["--zstd"],
-        &["-o", "--out", "--size", "--speed", "--fps", "--encoding", "--seed", "--rig", "--frames", "--preset"],
+        &[
+            "-o",
+            "--out",
+            "--size",
+            "--speed",
+            "--fps",
+            "--encoding",
+            "--seed",
+            "--rig",
+            "--frames",
+            "--preset",
+            "--compressed",
+            "--jpeg-quality",
+        ],
     )?;
+    let compressed = match a.get("--compressed") {
+        None => None,
+        Some(c) => {
+            let codec = xsurf_formats::compressed::Codec::parse(c)
+                .ok_or_else(|| usage(format!("--compressed {c:?}: jpeg or png")))?;
+            let q = a.get("--jpeg-quality").unwrap_or("90");
+            let q: u8 = q
+                .parse()
+                .ok()
+                .filter(|q| (1..=100).contains(q))
+                .ok_or_else(|| usage(format!("--jpeg-quality {q:?}: 1..=100")))?;
+            Some((codec, q))
+        }
+    };
     let [scene] = a.positional.as_slice() else { return Err(usage("synth needs one SCENE")) };
     let out = a.get("-o").or(a.get("--out")).ok_or_else(|| usage("synth needs -o DIR"))?;
     let s = scanner(&a, scene)?;
@@ -193,7 +223,7 @@ fn cmd_synth(args: &[String]) -> anyhow::Result<()> {
         println!("wrote {} frames per camera as {out}/<camera>/frame_NNNN.pgm", n.min(total));
         return Ok(());
     }
-    let summary = synth::write_bag(Path::new(out), &s, a.has("--zstd"), 1, progress_printer("synth"))?;
+    let summary = synth::write_bag(Path::new(out), &s, a.has("--zstd"), 1, compressed, progress_printer("synth"))?;
     println!(
         "wrote {out}: scene {}, {} frames x {} cameras, {} messages; ground truth in {out}/truth.json",
         summary.scene,
@@ -278,7 +308,7 @@ fn cmd_demo(args: &[String]) -> anyhow::Result<()> {
         std::fs::remove_dir_all(&recon).with_context(|| format!("cannot clear {}", recon.display()))?;
     }
     println!("1/3 synthesizing a {} scan ({} frames, 2 cameras) into {}", scene, s.frame_count(), bag.display());
-    let summary = synth::write_bag(&bag, &s, true, 1, progress_printer("synth"))?;
+    let summary = synth::write_bag(&bag, &s, true, 1, None, progress_printer("synth"))?;
     println!("2/3 reconstructing into {}", recon.display());
     let r = offline::reconstruct(&offline::Options {
         bag: bag.clone(),

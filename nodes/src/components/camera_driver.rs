@@ -14,7 +14,7 @@ use xsurf_core::geom::Iso3;
 use xsurf_core::image::Encoding;
 use xsurf_core::rig::Rig;
 use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene, SCENE_NAMES};
-use xsurf_msgs::sensor_msgs::{CameraInfo, Image};
+use xsurf_msgs::sensor_msgs::{CameraInfo, CompressedImage, Image};
 use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
@@ -74,6 +74,14 @@ pub fn declarations() -> Vec<ParamDecl> {
         decl("height", V::Integer(480), "px", "image height"),
         decl("fps", V::Double(30.0), "Hz", "frame rate"),
         decl("encoding", V::String("mono8".into()), "", "mono8, rgb8 or bgr8"),
+        decl(
+            "image_transport",
+            V::String("raw".into()),
+            "",
+            "raw: publish image_raw (sensor_msgs/Image); compressed: publish image_raw/compressed (sensor_msgs/CompressedImage) instead, as image_transport's compressed plugin writes it",
+        ),
+        decl("compressed_format", V::String("jpeg".into()), "", "compressed transport: jpeg or png"),
+        decl("jpeg_quality", V::Integer(95), "", "compressed transport: JPEG quality, 1..=100 (image_transport's default 95)"),
         decl("seed", V::Integer(1), "", "synthetic sensor noise seed"),
         decl("table_frame", V::String("table".into()), "", "fixed frame of /tf"),
         decl("carm_frame", V::String("carm".into()), "", "C-arm frame of /tf"),
@@ -106,6 +114,8 @@ struct Config {
     height: u32,
     period_ns: i64,
     encoding: Encoding,
+    /// The compressed transport's codec and JPEG quality; None for raw images.
+    compressed: Option<(xsurf_formats::compressed::Codec, u8)>,
     seed: u64,
     table_frame: String,
     carm_frame: String,
@@ -182,6 +192,21 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         "bgr8" => Encoding::Bgr8,
         other => return Err(Params::invalid("encoding", format!("{other:?} is not mono8, rgb8 or bgr8"))),
     };
+    let compressed = match p.string("image_transport")?.as_str() {
+        "raw" => None,
+        "compressed" => {
+            let f = p.string("compressed_format")?;
+            let codec = xsurf_formats::compressed::Codec::parse(&f)
+                .ok_or_else(|| Params::invalid("compressed_format", format!("{f:?}: jpeg or png")))?;
+            let q = p.i64("jpeg_quality")?;
+            let q = u8::try_from(q)
+                .ok()
+                .filter(|q| (1..=100).contains(q))
+                .ok_or_else(|| Params::invalid("jpeg_quality", format!("{q} is not in 1..=100")))?;
+            Some((codec, q))
+        }
+        other => return Err(Params::invalid("image_transport", format!("{other:?}: raw or compressed"))),
+    };
     let rig_file = p.string("rig_file")?;
     let rig = if rig_file.is_empty() {
         None
@@ -198,6 +223,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         width: dim("width")?,
         height: dim("height")?,
         period_ns: (1e9 / fps) as i64,
+        compressed,
         encoding,
         seed: p.i64("seed")? as u64,
         table_frame: p.string("table_frame")?,
@@ -328,6 +354,7 @@ pub struct CameraDriverNode {
     capture: Option<crate::v4l2::Capture>,
     reopen_at: i64,
     device_errors: u64,
+    encode_errors: u64,
 }
 
 /// Decoded frames kept in memory when looping a sequence.
@@ -354,6 +381,7 @@ impl CameraDriverNode {
             capture: None,
             reopen_at: i64::MIN,
             device_errors: 0,
+            encode_errors: 0,
         })
     }
 
@@ -380,8 +408,21 @@ impl CameraDriverNode {
         out: &mut Outbox,
     ) {
         let header = convert::header(stamp, &format!("{}_optical_frame", self.camera));
-        out.publish(1, Msg::CameraInfo(Arc::new(convert::camera_info(model, header.clone()))));
-        out.publish(0, Msg::Image(Arc::new(Image::from_image(header, img))));
+        let image = match self.cfg.compressed {
+            None => Msg::Image(Arc::new(Image::from_image(header.clone(), img))),
+            Some((codec, quality)) => match xsurf_formats::compressed::encode(&img, codec, quality) {
+                Ok((format, data)) => {
+                    Msg::CompressedImage(Arc::new(CompressedImage { header: header.clone(), format, data }))
+                }
+                Err(e) => {
+                    self.encode_errors += 1;
+                    log::error!("camera_driver: frame at {}: {e}", convert::fmt_stamp(stamp));
+                    return;
+                }
+            },
+        };
+        out.publish(1, Msg::CameraInfo(Arc::new(convert::camera_info(model, header))));
+        out.publish(0, image);
         self.frames += 1;
     }
 
@@ -473,7 +514,10 @@ impl Component for CameraDriverNode {
     }
     fn outputs(&self) -> Vec<Port> {
         vec![
-            Port::new("image_raw", Image::TYPE_NAME, QosClass::Sensor),
+            match self.cfg.compressed {
+                None => Port::new("image_raw", Image::TYPE_NAME, QosClass::Sensor),
+                Some(_) => Port::new("image_raw/compressed", CompressedImage::TYPE_NAME, QosClass::Sensor),
+            },
             Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
         ]
     }
@@ -624,6 +668,7 @@ impl Component for CameraDriverNode {
             ("frames_not_rendered_in_time", self.skipped),
             ("read_errors", self.read_errors),
             ("device_errors", self.device_errors),
+            ("encode_errors", self.encode_errors),
         ]
     }
 }
@@ -793,6 +838,88 @@ mod tests {
         assert!(bad("camera_info_url", V::String("package://x/y.yaml".into())).contains("camera_info_url"));
         assert!(bad("timestamps_file", V::String(dir.join("cam1.yaml").to_string_lossy().into()))
             .contains("timestamps_file"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The compressed transport end to end in a composed graph: camera_driver publishes
+    /// `image_raw/compressed`, edge_detector (image_transport compressed) decodes it; PNG gives
+    /// the raw transport's lines exactly, JPEG nearly every sample within a tenth of a pixel.
+    #[test]
+    fn compressed_transport_reaches_the_edge_detector() {
+        let dir = std::env::temp_dir().join(format!("xsurf-compressed-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let scanner = Scanner::new(
+            Scene::by_name("pyramid").unwrap(),
+            Rig::study(320, 240),
+            LaserModel::default(),
+            ScanSettings::default(),
+        )
+        .unwrap();
+        let n = scanner.frame_count();
+        for (i, f) in [n / 3, n / 2, 2 * n / 3].into_iter().enumerate() {
+            xsurf_formats::frames::write_pgm(&dir.join(format!("frame_{i}.pgm")), &scanner.render(0, f)).unwrap();
+        }
+        let lines = |transport: &[(&str, V)]| {
+            let mut o: std::collections::BTreeMap<String, V> = [
+                ("source", V::String("files".into())),
+                ("files", V::String(dir.join("frame_%d.pgm").to_string_lossy().into())),
+                ("fps", V::Double(100.0)),
+            ]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect();
+            let mut e = std::collections::BTreeMap::new();
+            for (k, v) in transport {
+                o.insert(k.to_string(), v.clone());
+                if *k == "image_transport" {
+                    e.insert(k.to_string(), v.clone());
+                }
+            }
+            let p = Params::resolve(&declarations("camera_driver").unwrap(), &o).unwrap();
+            let pe = Params::resolve(&declarations("edge_detector").unwrap(), &e).unwrap();
+            let mut router = Router::new();
+            router.add(build("camera_driver", &p).unwrap(), "camera_driver", "/cam1", &[]);
+            router.add(build("edge_detector", &pe).unwrap(), "edge_detector", "/cam1", &[]);
+            let seen: Rc<RefCell<Vec<(String, Msg)>>> = Rc::default();
+            let s = seen.clone();
+            router.set_tap(Box::new(move |t, m| s.borrow_mut().push((t.to_string(), m.clone()))));
+            for k in 0..6 {
+                router.tick(1_000_000_000 + k * 10_000_000);
+            }
+            let v: Vec<(String, Msg)> = seen.borrow().clone();
+            let topics: Vec<String> = v.iter().map(|(t, _)| t.clone()).collect();
+            let lines: Vec<Vec<f32>> = v
+                .into_iter()
+                .filter_map(|(_, m)| match m {
+                    Msg::LaserLine(l) => Some(l.v.clone()),
+                    _ => None,
+                })
+                .collect();
+            (topics, lines)
+        };
+        let found = |l: &[Vec<f32>]| l.iter().flatten().filter(|v| v.is_finite()).count();
+        let (raw_topics, raw) = lines(&[]);
+        assert!(raw_topics.iter().any(|t| t == "/cam1/image_raw"));
+        assert_eq!(raw.len(), 3);
+        assert!(found(&raw) > 300, "{} samples", found(&raw));
+        let png = [("image_transport", V::String("compressed".into())), ("compressed_format", V::String("png".into()))];
+        let (topics, lossless) = lines(&png);
+        assert!(topics.iter().any(|t| t == "/cam1/image_raw/compressed"));
+        assert!(!topics.iter().any(|t| t == "/cam1/image_raw"));
+        let same = raw.iter().flatten().zip(lossless.iter().flatten()).all(|(a, b)| a.to_bits() == b.to_bits());
+        assert!(same && lossless.len() == 3, "PNG: the raw transport's lines exactly");
+        let jpeg = [("image_transport", V::String("compressed".into())), ("jpeg_quality", V::Integer(90))];
+        let (_, lossy) = lines(&jpeg);
+        assert_eq!(lossy.len(), 3);
+        let (mut both, mut close) = (0, 0);
+        for (x, y) in raw.iter().flatten().zip(lossy.iter().flatten()) {
+            if x.is_finite() && y.is_finite() {
+                both += 1;
+                close += usize::from((x - y).abs() < 0.1);
+            }
+        }
+        assert!(both * 100 >= found(&raw) * 98 && close * 100 >= both * 95, "{close} of {both} samples within 0.1 px");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

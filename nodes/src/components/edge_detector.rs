@@ -19,6 +19,12 @@ pub fn declarations() -> Vec<ParamDecl> {
     let d = EdgeConfig::default();
     vec![
         decl(
+            "image_transport",
+            V::String("raw".into()),
+            "",
+            "how images arrive: raw (image_raw, sensor_msgs/Image) or compressed (image_raw/compressed, sensor_msgs/CompressedImage, jpeg or png, decoded here); fixed at start",
+        ),
+        decl(
             "method",
             V::String("center_of_gravity".into()),
             "",
@@ -162,8 +168,29 @@ pub fn config(p: &Params) -> Result<EdgeConfig, ParamError> {
     Ok(c)
 }
 
+/// How a camera's images arrive (image_transport's transports).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Transport {
+    /// `image_raw`, `sensor_msgs/msg/Image`.
+    Raw,
+    /// `image_raw/compressed`, `sensor_msgs/msg/CompressedImage` (JPEG or PNG).
+    Compressed,
+}
+
+impl Transport {
+    /// From the `image_transport` parameter.
+    pub fn from_params(p: &Params) -> Result<Transport, ParamError> {
+        match p.string("image_transport")?.as_str() {
+            "raw" => Ok(Transport::Raw),
+            "compressed" => Ok(Transport::Compressed),
+            other => Err(Params::invalid("image_transport", format!("{other:?}: raw or compressed"))),
+        }
+    }
+}
+
 /// The edge detector component.
 pub struct EdgeDetectorNode {
+    transport: Transport,
     detector: EdgeDetector,
     line: LaserLine,
     frames: u64,
@@ -177,6 +204,7 @@ impl EdgeDetectorNode {
     pub fn new(p: &Params) -> Result<Self, ParamError> {
         let detector = EdgeDetector::new(config(p)?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
         Ok(Self {
+            transport: Transport::from_params(p)?,
             detector,
             line: LaserLine::default(),
             frames: 0,
@@ -192,7 +220,14 @@ impl Component for EdgeDetectorNode {
         "edge_detector"
     }
     fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("image_raw", xsurf_msgs::sensor_msgs::Image::TYPE_NAME, QosClass::Sensor)]
+        match self.transport {
+            Transport::Raw => vec![Port::new("image_raw", xsurf_msgs::sensor_msgs::Image::TYPE_NAME, QosClass::Sensor)],
+            Transport::Compressed => vec![Port::new(
+                "image_raw/compressed",
+                xsurf_msgs::sensor_msgs::CompressedImage::TYPE_NAME,
+                QosClass::Sensor,
+            )],
+        }
     }
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("laser_line", LineMsg::TYPE_NAME, QosClass::Reliable)]
@@ -201,22 +236,38 @@ impl Component for EdgeDetectorNode {
         declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
+        if Transport::from_params(p)? != self.transport {
+            return Err(Params::invalid("image_transport", "fixed at start (it chooses the subscription)"));
+        }
         self.detector = EdgeDetector::new(config(p)?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
         Ok(())
     }
     fn handle(&mut self, _input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
-        let Msg::Image(img) = msg else {
-            return Err(NodeError::new(format!("expected an Image, got {}", msg.type_name())));
+        let at = |h: &xsurf_msgs::std_msgs::Header| format!("{}.{:09}", h.stamp.sec, h.stamp.nanosec);
+        // A compressed image is decoded once, here where it enters the pipeline.
+        let decoded;
+        let (view, header) = match msg {
+            Msg::Image(img) => {
+                let view = img.view().map_err(|e| {
+                    self.bad_images += 1;
+                    NodeError::new(format!("image at {}: {e}", at(&img.header)))
+                })?;
+                (view, &img.header)
+            }
+            Msg::CompressedImage(c) => {
+                decoded = xsurf_formats::compressed::decode(&c.format, &c.data).map_err(|e| {
+                    self.bad_images += 1;
+                    NodeError::new(format!("compressed image at {}: {e}", at(&c.header)))
+                })?;
+                (decoded.view().map_err(NodeError::new)?, &c.header)
+            }
+            other => return Err(NodeError::new(format!("expected an image, got {}", other.type_name()))),
         };
-        let view = img.view().map_err(|e| {
-            self.bad_images += 1;
-            NodeError::new(format!("image at {}.{:09}: {e}", img.header.stamp.sec, img.header.stamp.nanosec))
-        })?;
         let stats = self.detector.detect(&view, &mut self.line).map_err(NodeError::new)?;
         self.frames += 1;
         self.samples_found += u64::from(stats.found);
         self.frames_with_line += u64::from(stats.found > 0);
-        out.publish(0, Msg::LaserLine(Arc::new(convert::line_msg(&self.line, img.header.clone()))));
+        out.publish(0, Msg::LaserLine(Arc::new(convert::line_msg(&self.line, header.clone()))));
         Ok(())
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
