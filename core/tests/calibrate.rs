@@ -332,3 +332,46 @@ fn a_turned_board_in_clutter_is_found_in_board_order() {
         assert!(worst < 0.5, "{deg} degrees: a corner {worst:.2} px from where it projects");
     }
 }
+
+/// Diagnosis: mean corner error against the projection, with and without the hard set's uneven
+/// light (`cargo test --release -p xsurf-core --test calibrate shadow_bias_probe -- --ignored --nocapture`).
+#[test]
+#[ignore]
+fn shadow_bias_probe() {
+    let model = study_model();
+    let rays = RayTable::new(&model);
+    let spec = spec();
+    for uneven in [0.0, 1.0] {
+        let (mut sx, mut sy, mut n, mut sx_near, mut n_near) = (0.0, 0.0, 0, 0.0, 0);
+        for (i, pose) in board_views(&model, &spec, 20, 5).iter().enumerate() {
+            let img = render_board(
+                &rays,
+                pose,
+                &spec,
+                &BoardLook::hard(),
+                &Exposure { uneven, ..Exposure::hard() },
+                i as u64,
+            );
+            let Ok(c) = detect(&img.view().unwrap(), &spec) else { continue };
+            for (k, p) in c.points.iter().enumerate() {
+                let (u, v) = model.project(pose.transform_point(spec.point(k))).unwrap();
+                sx += p[0] - u;
+                sy += p[1] - v;
+                n += 1;
+                // Distance to the shadow's edge line (0.35 w, h) -> (w, 0.45 h).
+                let (ax, ay, bx, by) = (0.35 * 640.0, 480.0, 640.0, 0.45 * 480.0);
+                let side = ((bx - ax) * (v - ay) - (by - ay) * (u - ax)) / f64::hypot(bx - ax, by - ay);
+                if side.abs() < 12.0 {
+                    sx_near += p[0] - u;
+                    n_near += 1;
+                }
+            }
+        }
+        eprintln!(
+            "uneven {uneven}: {n} corners, mean error ({:+.4}, {:+.4}) px; {n_near} near the shadow's edge: mean dx {:+.4}",
+            sx / n as f64,
+            sy / n as f64,
+            sx_near / n_near.max(1) as f64
+        );
+    }
+}

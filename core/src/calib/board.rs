@@ -118,8 +118,10 @@ pub enum BoardError {
         rows: usize,
     },
     /// The lattice found is not the board's.
-    #[error("board not found: the best corner grid is {found_cols}x{found_rows}, expected {cols}x{rows} inner corners ({candidates} corner candidates){hint}")]
+    #[error("board not found: the best corner grid is {found_cols}x{found_rows} ({found} corners), expected {cols}x{rows} inner corners ({candidates} corner candidates){hint}")]
     WrongGrid {
+        /// Corners in that grid (fewer than its extent where some are missing).
+        found: usize,
         /// Corners found along one axis.
         found_cols: usize,
         /// Corners found along the other.
@@ -195,8 +197,14 @@ fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
 const RING_PX: f64 = 3.5;
 const RING_SAMPLES: usize = 24;
 
-/// Whether the ring around `(x, y)` shows four alternating sectors with at least `min_contrast`.
-fn is_x_junction(g: &Grey, x: f64, y: f64, radius: f64, min_contrast: f32) -> bool {
+/// Whether the ring around `(x, y)` shows four alternating sectors with at least `min_contrast`:
+/// on the ring's own values split where they separate best (Otsu's), or on the ring made
+/// symmetric (each sample plus the one opposite), which cancels a shadow's or a gradient's
+/// one-sided change: across a shadow's edge one bright square may be darker than the other's
+/// half-way level, yet both stay brighter than the dark pair.
+/// Candidates take the first test only; the second is for a corner the lattice predicts
+/// (`predicted`), where a line or stripe that passes it is rejected by the squares' colours.
+fn is_x_junction(g: &Grey, x: f64, y: f64, radius: f64, min_contrast: f32, predicted: bool) -> bool {
     let mut s = [0.0f32; RING_SAMPLES];
     for (k, v) in s.iter_mut().enumerate() {
         let a = std::f64::consts::TAU * k as f64 / RING_SAMPLES as f64;
@@ -206,12 +214,26 @@ fn is_x_junction(g: &Grey, x: f64, y: f64, radius: f64, min_contrast: f32) -> bo
     if hi - lo < min_contrast {
         return false;
     }
-    // Bright or dark by the split of the ring's values that best separates them (Otsu's): a
-    // shadow or a gradient across the corner leaves one bright square far darker than the other.
-    let mut sorted = s;
+    if four_sectors(&s, otsu_split(&s)) {
+        return true;
+    }
+    if !predicted {
+        return false;
+    }
+    let mut sym = [0.0f32; RING_SAMPLES];
+    for (k, v) in sym.iter_mut().enumerate() {
+        *v = 0.5 * (s[k] + s[(k + RING_SAMPLES / 2) % RING_SAMPLES]);
+    }
+    let (lo, hi) = sym.iter().fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    hi - lo >= 0.5 * min_contrast && four_sectors(&sym, 0.5 * (lo + hi))
+}
+
+/// The threshold that splits the values into the two groups of largest between-class variance.
+fn otsu_split(s: &[f32; RING_SAMPLES]) -> f32 {
+    let mut sorted = *s;
     sorted.sort_by(f32::total_cmp);
     let total: f32 = sorted.iter().sum();
-    let (mut best, mut mid, mut below) = (f32::MIN, 0.5 * (lo + hi), 0.0f32);
+    let (mut best, mut mid, mut below) = (f32::MIN, 0.5 * (sorted[0] + sorted[RING_SAMPLES - 1]), 0.0f32);
     for k in 1..RING_SAMPLES {
         below += sorted[k - 1];
         let (n0, n1) = (k as f32, (RING_SAMPLES - k) as f32);
@@ -222,6 +244,11 @@ fn is_x_junction(g: &Grey, x: f64, y: f64, radius: f64, min_contrast: f32) -> bo
             mid = 0.5 * (sorted[k - 1] + sorted[k]);
         }
     }
+    mid
+}
+
+/// Whether the ring's samples above and below `mid` form four runs of at least two samples.
+fn four_sectors(s: &[f32; RING_SAMPLES], mid: f32) -> bool {
     let bits: Vec<bool> = s.iter().map(|&v| v > mid).collect();
     let Some(start) = (0..RING_SAMPLES).find(|&k| bits[k] != bits[(k + RING_SAMPLES - 1) % RING_SAMPLES]) else {
         return false;
@@ -283,7 +310,7 @@ fn candidates(g: &Grey, resp: &[f32], max: f32, min_contrast: f32) -> Vec<[f64; 
                     }
                 }
             }
-            if is_x_junction(g, x as f64, y as f64, RING_PX, min_contrast) {
+            if is_x_junction(g, x as f64, y as f64, RING_PX, min_contrast, false) {
                 out.push([x as f64, y as f64]);
             }
         }
@@ -431,7 +458,7 @@ impl Search<'_> {
         }
         let (_, q) = best?;
         let ring = RING_PX.max(2.5 * level.sigma).min(0.3 * step);
-        is_x_junction(&level.grey, q[0], q[1], ring, 0.5 * self.min_contrast).then_some(q)
+        is_x_junction(&level.grey, q[0], q[1], ring, 0.5 * self.min_contrast, true).then_some(q)
     }
 
     /// Starts a lattice at candidate `seed`: two neighbours at about a right angle whose four
@@ -648,10 +675,30 @@ fn board_window(grid: &HashMap<Cell, usize>, spec: &BoardSpec) -> Option<HashMap
     )
 }
 
+/// The fraction of the strongest gradient in a corner's window below which a gradient is left
+/// out of its refinement.
+const REFINE_GRADIENT_GATE: f64 = 0.2;
+
 /// Refines a corner: minimises `sum w (g . (p - q))^2` over the window (gradient `g` at `p`).
+///
+/// Only the squares' edges take part: gradients under a fifth of the window's strongest (a
+/// shadow's or the light's slow change over a square, which is not perpendicular to the corner)
+/// would pull the corner along them.
 fn refine(g: &Grey, q0: [f64; 2], half: usize) -> [f64; 2] {
     let mut q = q0;
     let sigma = half as f64 * 0.6;
+    let grad = |x: usize, y: usize| {
+        (f64::from(g.at(x + 1, y) - g.at(x - 1, y)) * 0.5, f64::from(g.at(x, y + 1) - g.at(x, y - 1)) * 0.5)
+    };
+    let mut strongest = 0.0f64;
+    let (cx0, cy0, h) = (q0[0].round() as isize, q0[1].round() as isize, half as isize);
+    for y in (cy0 - h).max(1)..=(cy0 + h).min(g.h as isize - 2) {
+        for x in (cx0 - h).max(1)..=(cx0 + h).min(g.w as isize - 2) {
+            let (gx, gy) = grad(x as usize, y as usize);
+            strongest = strongest.max(gx * gx + gy * gy);
+        }
+    }
+    let floor = REFINE_GRADIENT_GATE * REFINE_GRADIENT_GATE * strongest;
     for _ in 0..20 {
         let (cx, cy) = (q[0].round() as isize, q[1].round() as isize);
         let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
@@ -661,9 +708,10 @@ fn refine(g: &Grey, q0: [f64; 2], half: usize) -> [f64; 2] {
                 if x < 1 || y < 1 || x as usize >= g.w - 1 || y as usize >= g.h - 1 {
                     continue;
                 }
-                let (xu, yu) = (x as usize, y as usize);
-                let gx = f64::from(g.at(xu + 1, yu) - g.at(xu - 1, yu)) * 0.5;
-                let gy = f64::from(g.at(xu, yu + 1) - g.at(xu, yu - 1)) * 0.5;
+                let (gx, gy) = grad(x as usize, y as usize);
+                if gx * gx + gy * gy < floor {
+                    continue;
+                }
                 let (dx, dy) = (x as f64 - q[0], y as f64 - q[1]);
                 let w = (-(dx * dx + dy * dy) / (2.0 * sigma * sigma)).exp();
                 let (xx, yy, xy) = (w * gx * gx, w * gy * gy, w * gx * gy);
@@ -817,7 +865,7 @@ fn explain(
             let p = pts[k];
             p[0] < margin || p[1] < margin || p[0] > raw.w as f64 - 1.0 - margin || p[1] > raw.h as f64 - 1.0 - margin
         });
-        let larger = found_cols * found_rows > spec.len();
+        let larger = best.len() > spec.len();
         if touches && !larger {
             return BoardError::CutOff { found_cols, found_rows, cols: spec.cols, rows: spec.rows };
         }
@@ -836,14 +884,29 @@ fn explain(
     if sigma_px > 2.0 {
         return BoardError::Blurred { sigma_px };
     }
-    let hint = if found_cols * found_rows > spec.len() {
+    let same_size =
+        (found_cols, found_rows) == (spec.cols, spec.rows) || (found_cols, found_rows) == (spec.rows, spec.cols);
+    let hint = if best.len() > spec.len() {
         ": is the --board size right?".to_string()
+    } else if same_size {
+        format!(
+            ": {} of its corners not found (part of the board hidden, in glare or in deep shadow)",
+            spec.len().saturating_sub(best.len())
+        )
     } else if best.is_empty() {
         ": no checkerboard in view".to_string()
     } else {
         ": board partly hidden, glare, or the wrong --board size".to_string()
     };
-    BoardError::WrongGrid { found_cols, found_rows, cols: spec.cols, rows: spec.rows, candidates, hint }
+    BoardError::WrongGrid {
+        found: best.len(),
+        found_cols,
+        found_rows,
+        cols: spec.cols,
+        rows: spec.rows,
+        candidates,
+        hint,
+    }
 }
 
 /// A lattice corner for diagnosis: its cell and position.
