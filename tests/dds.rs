@@ -12,12 +12,12 @@ use xsurf_core::eval;
 
 #[test]
 fn nodes_exchange_images_and_clouds_with_an_independent_dds_peer() {
-    graph("separate", "edge_detector_cam1.log", "[0, 0, 0]");
+    graph("separate", "edge_detector_cam1.log", "[0, 0, 0, 0]");
 }
 
 #[test]
 fn composed_nodes_pass_messages_in_memory_and_still_publish_on_dds() {
-    graph("composed", "compose.log", "[0, 0]");
+    graph("composed", "compose.log", "[0, 0, 0]");
 }
 
 fn graph(mode: &str, cam1_log: &str, exits: &str) {
@@ -55,6 +55,18 @@ fn graph(mode: &str, cam1_log: &str, exits: &str) {
         assert!((l["mean_u"].as_f64().unwrap() - 30.25).abs() < 0.05, "{l}");
         assert_eq!(l["frame_id"], "cam9_optical_frame");
     }
+    // CompressedImage from Cyclone DDS (Pillow's PNG and JPEG) decoded by an edge_detector with
+    // image_transport compressed; the truncated JPEG between them is refused by name, and costs
+    // only itself.
+    let c = s["compressed_lines"].as_array().unwrap();
+    let stamps: Vec<u64> = c.iter().map(|l| l["stamp"][1].as_u64().unwrap()).collect();
+    assert_eq!(stamps, [0, 2], "PNG and JPEG answered, the truncated one not: {s}");
+    for l in c {
+        assert_eq!(l["found"], 8, "{l}");
+        assert!((l["mean_u"].as_f64().unwrap() - 30.25).abs() < 0.1, "{l}");
+    }
+    let log8 = std::fs::read_to_string(out.join("run/edge_detector_cam8.log")).unwrap();
+    assert!(log8.contains("compressed image at 150.000000001") && log8.contains("JPEG"), "{log8}");
     // Parameter services: list, get, a refused set with the reason, a valid set that changes behaviour.
     let p = &s["param"];
     assert_eq!(p["list"]["code"], 0, "{p}");

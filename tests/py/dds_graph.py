@@ -8,7 +8,10 @@ and tf. This script is an independent DDS peer (Cyclone DDS):
   - it subscribes /cam1/profile_remapped (sensor_msgs/msg/PointCloud2, best effort) and /tf
     (tf2_msgs/msg/TFMessage) and checks what rviz2 checks (sizes, fields);
   - it publishes a sensor_msgs/msg/Image with a line at a known column on /cam9/image_raw and
-    checks the LaserLine our edge_detector answers with.
+    checks the LaserLine our edge_detector answers with;
+  - it publishes the same line as sensor_msgs/msg/CompressedImage (PNG and JPEG made by Pillow,
+    image_transport's format strings, and one truncated JPEG) on /cam8/image_raw/compressed to an
+    edge_detector with image_transport:=compressed.
 It writes the received profile points (float32 x y z, little-endian) to OUT/points.f32 and a
 summary to OUT/summary.json; the Rust test compares the points with the ground truth.
 With MODE `composed`, the /cam1 nodes run in one `xsurf compose` process instead (the line passes
@@ -32,7 +35,7 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
-from ros_types import Header, Image, LaserLine, PointCloud2, TFMessage, Time  # noqa: E402
+from ros_types import CompressedImage, Header, Image, LaserLine, PointCloud2, TFMessage, Time  # noqa: E402
 
 BEST_EFFORT = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(50))
 RELIABLE = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(100))
@@ -60,6 +63,8 @@ def main(bin_dir, bag, params, out, mode="separate"):
                   "-r", "profile:=profile_remapped"),
         ]
     procs.append(start("edge_detector_cam9", "edge_detector", "--ros-args", "-r", "__ns:=/cam9", "-p", "min_strength:=30.0"))
+    procs.append(start("edge_detector_cam8", "edge_detector", "--ros-args", "-r", "__ns:=/cam8", "-p", "min_strength:=30.0",
+                       "-p", "image_transport:=compressed"))
     dp = DomainParticipant(0)
     profile_reader = DataReader(dp, Topic(dp, "rt/cam1/profile_remapped", PointCloud2), qos=BEST_EFFORT)
     tf_reader = DataReader(dp, Topic(dp, "rt/tf", TFMessage), qos=BEST_EFFORT)
@@ -67,7 +72,10 @@ def main(bin_dir, bag, params, out, mode="separate"):
     # /cam1/laser_line is observed too: composed nodes still publish their internal topics.
     line1_reader = DataReader(dp, Topic(dp, "rt/cam1/laser_line", LaserLine), qos=BEST_EFFORT)
     image_writer = DataWriter(dp, Topic(dp, "rt/cam9/image_raw", Image), qos=RELIABLE)
-    summary = {"cam1_lines": 0, "clouds": 0, "cloud_errors": [], "tf": 0, "tf_frames": set(), "lines": []}
+    line8_reader = DataReader(dp, Topic(dp, "rt/cam8/laser_line", LaserLine), qos=RELIABLE)
+    compressed_writer = DataWriter(dp, Topic(dp, "rt/cam8/image_raw/compressed", CompressedImage), qos=RELIABLE)
+    summary = {"cam1_lines": 0, "clouds": 0, "cloud_errors": [], "tf": 0, "tf_frames": set(), "lines": [],
+               "compressed_lines": []}
     points = bytearray()
 
     def drain():
@@ -94,6 +102,11 @@ def main(bin_dir, bag, params, out, mode="separate"):
         for s in line1_reader.take(N=100):
             if isinstance(s, LaserLine):
                 summary["cam1_lines"] += 1
+        for s in line8_reader.take(N=10):
+            if isinstance(s, LaserLine):
+                found = [u for u in s.u if not math.isnan(u)]
+                summary["compressed_lines"].append({"found": len(found), "mean_u": sum(found) / len(found) if found else None,
+                                                    "stamp": [s.header.stamp.sec, s.header.stamp.nanosec]})
         for s in line_reader.take(N=10):
             if isinstance(s, LaserLine):
                 found = [u for u in s.u if not math.isnan(u)]
@@ -112,6 +125,21 @@ def main(bin_dir, bag, params, out, mode="separate"):
         image_writer.write(Image(header=Header(stamp=Time(sec=100, nanosec=k), frame_id="cam9_optical_frame"),
                                  height=h, width=w, encoding="mono8", is_bigendian=0, step=w, data=data))
         time.sleep(0.2)
+        drain()
+    # The same line compressed by Pillow: PNG, a truncated JPEG (refused and counted), JPEG.
+    from PIL import Image as PilImage
+    import io
+    pil = PilImage.frombytes("L", (w, h), bytes(data))
+    encoded = []
+    for fmt, kind in [("mono8; png compressed ", "PNG"), ("mono8; jpeg compressed ", "JPEG")]:
+        buf = io.BytesIO()
+        pil.save(buf, format=kind, **({"quality": 95} if kind == "JPEG" else {}))
+        encoded.append((fmt, buf.getvalue()))
+    frames = [encoded[0], ("jpeg", encoded[1][1][: len(encoded[1][1]) // 3]), encoded[1]]
+    for k, (fmt, payload) in enumerate(frames):
+        compressed_writer.write(CompressedImage(header=Header(stamp=Time(sec=150, nanosec=k), frame_id="cam8_optical_frame"),
+                                                format=fmt, data=list(payload)))
+        time.sleep(0.3)
         drain()
     # Parameter services, as `ros2 param` uses them.
     def param(*args):
