@@ -153,13 +153,13 @@ fn calibration_failures_name_the_image_and_the_reason() {
 /// The hard synthetic set (`--preset hard`): clutter behind the board (a second checkerboard on
 /// a screen, stripes, patches of every grey), a narrow border, uneven light with a shadow, a
 /// soft lens, more noise, and JPEG at quality 75. Against the truth: the board found in at
-/// least 90 % of the views (and in no fewer than OpenCV finds), fx and fy within 0.3 %, RMS
-/// under 0.2 px. The principal point within 0.5 px, or where the set's shadow biases it, no
-/// further from the truth than OpenCV's on the same files (plus 0.25 px).
+/// least 90 % of the views (and in no fewer than OpenCV finds on the same files), fx and fy
+/// within 0.3 %, cx and cy within 0.5 px, RMS under 0.2 px. Sixty views a camera: the set's
+/// noise leaves cx a 1-sigma of 0.45 px at 30.
 #[test]
 fn the_hard_synthetic_set_calibrates_to_the_truth() {
     let dir = scratch("calibrate-hard");
-    let out = xsurf(&["calibrate", "synth", dir.to_str().unwrap(), "--preset", "hard", "--seed", "5", "--views", "30"]);
+    let out = xsurf(&["calibrate", "synth", dir.to_str().unwrap(), "--preset", "hard", "--seed", "5", "--views", "60"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let bin = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
     let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap_or_default());
@@ -191,18 +191,13 @@ fn the_hard_synthetic_set_calibrates_to_the_truth() {
         let mut args: Vec<&std::path::Path> = vec![std::path::Path::new("9x6"), std::path::Path::new("0.02765")];
         args.extend(files.iter().map(|f| f.as_path()));
         let opencv = checker("ref_calibration.py", &args);
-        let (cv_cx, cv_cy) = match &opencv {
-            Some(cv) => {
-                let cv_found = cv["found"].as_object().unwrap().values().filter(|v| **v == true).count();
-                let (ecx, ecy) = (cv["cx"].as_f64().unwrap() - t.cx, cv["cy"].as_f64().unwrap() - t.cy);
-                eprintln!("{}: OpenCV {cv_found} views, cx {ecx:+.2} px cy {ecy:+.2} px", t.name);
-                assert!(found >= cv_found, "{}: OpenCV finds the board in {cv_found} views, we in {found}", t.name);
-                (ecx.abs(), ecy.abs())
-            }
-            None => (0.0, 0.0),
-        };
-        assert!(dcx.abs() < 0.5f64.max(cv_cx + 0.25), "{}: cx off by {dcx:.2} px (OpenCV {cv_cx:.2})", t.name);
-        assert!(dcy.abs() < 0.5f64.max(cv_cy + 0.25), "{}: cy off by {dcy:.2} px (OpenCV {cv_cy:.2})", t.name);
+        if let Some(cv) = &opencv {
+            let cv_found = cv["found"].as_object().unwrap().values().filter(|v| **v == true).count();
+            let (ecx, ecy) = (cv["cx"].as_f64().unwrap() - t.cx, cv["cy"].as_f64().unwrap() - t.cy);
+            eprintln!("{}: OpenCV {cv_found} views, cx {ecx:+.2} px cy {ecy:+.2} px", t.name);
+            assert!(found >= cv_found, "{}: OpenCV finds the board in {cv_found} views, we in {found}", t.name);
+        }
+        assert!(dcx.abs() < 0.5 && dcy.abs() < 0.5, "{}: principal point off by ({dcx:.2}, {dcy:.2}) px", t.name);
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -675,30 +675,92 @@ fn board_window(grid: &HashMap<Cell, usize>, spec: &BoardSpec) -> Option<HashMap
     )
 }
 
-/// The fraction of the strongest gradient in a corner's window below which a gradient is left
-/// out of its refinement.
-const REFINE_GRADIENT_GATE: f64 = 0.2;
+/// The window around `q0` (`r` pixels each way, clamped to the image) with the light flattened:
+/// divided by a plane fitted to the window's bright pixels (those above its Otsu split), so
+/// that a shadow's edge or a gradient across the corner leaves its four squares as even as on a
+/// flat-lit board. Returns the patch and its origin in the image; the window as it is where
+/// the fit fails.
+fn flattened(g: &Grey, q0: [f64; 2], r: usize) -> (Grey, usize, usize) {
+    let (cx, cy) = (q0[0].round().max(0.0) as usize, q0[1].round().max(0.0) as usize);
+    let (x0, y0) = (cx.saturating_sub(r), cy.saturating_sub(r));
+    let (x1, y1) = ((cx + r).min(g.w - 1), (cy + r).min(g.h - 1));
+    let (w, h) = (x1 + 1 - x0, y1 + 1 - y0);
+    let mut data = Vec::with_capacity(w * h);
+    for y in y0..=y1 {
+        data.extend_from_slice(&g.data[y * g.w + x0..=y * g.w + x1]);
+    }
+    let patch = Grey { w, h, data };
+    // Otsu's split over the patch (256 bins).
+    let mut hist = [0u32; 256];
+    for &v in &patch.data {
+        hist[v.clamp(0.0, 255.0) as usize] += 1;
+    }
+    let n = patch.data.len() as f64;
+    let total: f64 = hist.iter().enumerate().map(|(i, &c)| i as f64 * f64::from(c)).sum();
+    let (mut below_n, mut below_sum, mut best, mut split) = (0.0, 0.0, -1.0, 128.0);
+    for (i, &c) in hist.iter().enumerate().take(255) {
+        below_n += f64::from(c);
+        below_sum += i as f64 * f64::from(c);
+        if below_n == 0.0 || below_n == n {
+            continue;
+        }
+        let (m0, m1) = (below_sum / below_n, (total - below_sum) / (n - below_n));
+        let between = below_n * (n - below_n) * (m1 - m0).powi(2);
+        if between > best {
+            best = between;
+            split = i as f64 + 0.5;
+        }
+    }
+    // Least-squares plane a + b x + c y over the bright pixels.
+    let (mut m, mut v) = ([0.0f64; 9], [0.0f64; 3]);
+    let mut bright = 0usize;
+    for y in 0..h {
+        for x in 0..w {
+            let val = f64::from(patch.data[y * w + x]);
+            if val <= split {
+                continue;
+            }
+            bright += 1;
+            let f = [1.0, x as f64 - w as f64 / 2.0, y as f64 - h as f64 / 2.0];
+            for i in 0..3 {
+                v[i] += f[i] * val;
+                for j in 0..3 {
+                    m[i * 3 + j] += f[i] * f[j];
+                }
+            }
+        }
+    }
+    let Some(l) = crate::calib::linalg::cholesky(&m, 3) else { return (patch, x0, y0) };
+    if bright < 12 {
+        return (patch, x0, y0);
+    }
+    let [a, bx, by] = <[f64; 3]>::try_from(crate::calib::linalg::cholesky_solve(&l, 3, &v)).unwrap_or([0.0; 3]);
+    let light = |x: usize, y: usize| a + bx * (x as f64 - w as f64 / 2.0) + by * (y as f64 - h as f64 / 2.0);
+    let corners = [light(0, 0), light(w - 1, 0), light(0, h - 1), light(w - 1, h - 1)];
+    if corners.iter().any(|&c| !(c > 0.2 * a)) || !(a > 0.0) {
+        return (patch, x0, y0);
+    }
+    let mut flat = patch;
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            flat.data[i] = (f64::from(flat.data[i]) * a / light(x, y)) as f32;
+        }
+    }
+    (flat, x0, y0)
+}
 
-/// Refines a corner: minimises `sum w (g . (p - q))^2` over the window (gradient `g` at `p`).
-///
-/// Only the squares' edges take part: gradients under a fifth of the window's strongest (a
-/// shadow's or the light's slow change over a square, which is not perpendicular to the corner)
-/// would pull the corner along them.
-fn refine(g: &Grey, q0: [f64; 2], half: usize) -> [f64; 2] {
-    let mut q = q0;
+/// Refines a corner: minimises `sum w (g . (p - q))^2` over the window (gradient `g` at `p`),
+/// on the window with its light flattened ([`flattened`]).
+fn refine(image: &Grey, q0: [f64; 2], half: usize) -> [f64; 2] {
+    let (g, ox, oy) = flattened(image, q0, 2 * half + 2);
+    let (ox, oy) = (ox as f64, oy as f64);
+    let start = [q0[0] - ox, q0[1] - oy];
+    let mut q = start;
     let sigma = half as f64 * 0.6;
     let grad = |x: usize, y: usize| {
         (f64::from(g.at(x + 1, y) - g.at(x - 1, y)) * 0.5, f64::from(g.at(x, y + 1) - g.at(x, y - 1)) * 0.5)
     };
-    let mut strongest = 0.0f64;
-    let (cx0, cy0, h) = (q0[0].round() as isize, q0[1].round() as isize, half as isize);
-    for y in (cy0 - h).max(1)..=(cy0 + h).min(g.h as isize - 2) {
-        for x in (cx0 - h).max(1)..=(cx0 + h).min(g.w as isize - 2) {
-            let (gx, gy) = grad(x as usize, y as usize);
-            strongest = strongest.max(gx * gx + gy * gy);
-        }
-    }
-    let floor = REFINE_GRADIENT_GATE * REFINE_GRADIENT_GATE * strongest;
     for _ in 0..20 {
         let (cx, cy) = (q[0].round() as isize, q[1].round() as isize);
         let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
@@ -709,9 +771,6 @@ fn refine(g: &Grey, q0: [f64; 2], half: usize) -> [f64; 2] {
                     continue;
                 }
                 let (gx, gy) = grad(x as usize, y as usize);
-                if gx * gx + gy * gy < floor {
-                    continue;
-                }
                 let (dx, dy) = (x as f64 - q[0], y as f64 - q[1]);
                 let w = (-(dx * dx + dy * dy) / (2.0 * sigma * sigma)).exp();
                 let (xx, yy, xy) = (w * gx * gx, w * gy * gy, w * gx * gy);
@@ -724,11 +783,11 @@ fn refine(g: &Grey, q0: [f64; 2], half: usize) -> [f64; 2] {
         }
         let det = a11 * a22 - a12 * a12;
         if !(det.abs() > 1e-9) {
-            return q;
+            break;
         }
         let n = [(a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det];
         let moved = ((n[0] - q[0]).powi(2) + (n[1] - q[1]).powi(2)).sqrt();
-        if ((n[0] - q0[0]).powi(2) + (n[1] - q0[1]).powi(2)).sqrt() > half as f64 {
+        if ((n[0] - start[0]).powi(2) + (n[1] - start[1]).powi(2)).sqrt() > half as f64 {
             return q0; // ran away: keep the candidate
         }
         q = n;
@@ -736,7 +795,7 @@ fn refine(g: &Grey, q0: [f64; 2], half: usize) -> [f64; 2] {
             break;
         }
     }
-    q
+    [q[0] + ox, q[1] + oy]
 }
 
 /// Finds the board in an image.
