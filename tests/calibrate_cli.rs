@@ -201,3 +201,34 @@ fn the_hard_synthetic_set_calibrates_to_the_truth() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// JPEG frames from `synth --frames --compressed jpeg` are read back and feed the camera_driver's
+/// files source, as a user's camera stills would (calibration views: `the_hard_synthetic_set...`).
+#[test]
+fn jpeg_frames_are_read_wherever_frames_are() {
+    let dir = scratch("jpeg-frames");
+    let out = xsurf(&["synth", "pyramid", "-o", dir.to_str().unwrap(), "--frames", "3", "--compressed", "jpeg"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let frame = dir.join("cam1/frame_0000.jpg");
+    let img = xsurf_formats::frames::read_frame(&frame).unwrap();
+    assert_eq!((img.width, img.height, img.encoding), (640, 480, xsurf_core::image::Encoding::Mono8));
+    let o = [("source", V::String("files".into())), ("files", V::String(dir.join("cam1").to_string_lossy().into()))]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect();
+    let p = Params::resolve(&declarations("camera_driver").unwrap(), &o).unwrap();
+    let mut router = Router::new();
+    router.add(build("camera_driver", &p).unwrap(), "camera_driver", "/cam1", &[]);
+    let seen = std::rc::Rc::new(std::cell::RefCell::new(0));
+    let s = seen.clone();
+    router.set_tap(Box::new(move |t, m| {
+        if t == "/cam1/image_raw" && matches!(m, Msg::Image(_)) {
+            *s.borrow_mut() += 1;
+        }
+    }));
+    for k in 0..5 {
+        router.tick(1_000_000_000 + k * 40_000_000);
+    }
+    assert_eq!(*seen.borrow(), 3, "the three JPEG frames published");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
