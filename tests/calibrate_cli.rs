@@ -232,3 +232,61 @@ fn jpeg_frames_are_read_wherever_frames_are() {
     assert_eq!(*seen.borrow(), 3, "the three JPEG frames published");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// NaN and infinite numbers on the command line are refused by name before any work (they used
+/// to reach the rig file as `.nan`).
+#[test]
+fn non_finite_numbers_are_refused_by_name() {
+    let dir = scratch("calibrate-nan");
+    let rig = dir.join("rig.yaml");
+    let rig = rig.to_str().unwrap();
+    let base = ["calibrate", "placement", "--board", "9x6", "--square", "0.02", "-o", rig];
+    for (extra, what) in [
+        (
+            &["--board-origin", "nan,0", "--camera", "cam1", "--intrinsics", "c.yaml", "--travels", "0", "a.png"][..],
+            "--board-origin",
+        ),
+        (
+            &[
+                "--board-origin",
+                "0,0",
+                "--board-yaw",
+                "inf",
+                "--camera",
+                "cam1",
+                "--intrinsics",
+                "c.yaml",
+                "--travels",
+                "0",
+                "a.png",
+            ][..],
+            "--board-yaw",
+        ),
+        (
+            &[
+                "--board-origin",
+                "0,0",
+                "--camera",
+                "cam1",
+                "--intrinsics",
+                "c.yaml",
+                "--travels",
+                "nan,0,0.03",
+                "a.png",
+            ][..],
+            "--travels",
+        ),
+    ] {
+        let mut args: Vec<&str> = base.to_vec();
+        args.extend_from_slice(extra);
+        let out = xsurf(&args);
+        assert_clean_failure(&out, 2, what);
+        assert_clean_failure(&out, 2, "is not a finite number");
+    }
+    let out = xsurf(&["calibrate", "laser", "--rig", rig, "--camera", "cam1", "--heights", "0,NaN", "a.png", "b.png"]);
+    assert_clean_failure(&out, 2, "--heights");
+    let out = xsurf(&["calibrate", "intrinsics", "a.png", "--board", "9x6", "--square", "nan", "-o", rig]);
+    assert_clean_failure(&out, 2, "--square");
+    assert!(!std::path::Path::new(rig).exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -555,3 +555,31 @@ fn a_bad_compressed_image_is_refused_by_name_counted_and_costs_only_itself() {
     assert_eq!(node["counters"]["frames"].as_u64().unwrap() + 3, node["messages"].as_u64().unwrap(), "{node}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A rig file that parses but cannot work is refused by every reader before any work, naming
+/// the file, the camera and the field.
+#[test]
+fn invalid_rig_files_are_refused_before_any_work() {
+    let dir = scratch("bad-rig");
+    let good = xsurf_core::rig::Rig::study(320, 240);
+    type Spoil = Box<dyn Fn(&mut xsurf_core::rig::Rig)>;
+    let cases: Vec<(&str, Spoil, &str)> = vec![
+        ("dup", Box::new(|r| r.cameras[1].name = "cam1".into()), "used by cameras[0]"),
+        ("quat", Box::new(|r| r.cameras[0].rotation = [0.0; 4]), "not a unit quaternion"),
+        ("empty", Box::new(|r| r.cameras.clear()), "cameras: none"),
+        ("huge", Box::new(|r| r.cameras[0].width = 100_000), "width 100000"),
+        ("name", Box::new(|r| r.cameras[0].name = "cam 1/x".into()), "not a valid ROS name"),
+    ];
+    for (name, spoil, says) in cases {
+        let mut r = good.clone();
+        spoil(&mut r);
+        let path = dir.join(format!("{name}.yaml"));
+        xsurf_formats::rig::write(&path, &r, "").unwrap();
+        let bag = dir.join(format!("{name}-bag"));
+        let out = xsurf(&["synth", "pyramid", "-o", bag.to_str().unwrap(), "--rig", path.to_str().unwrap()]);
+        assert_clean_failure(&out, 1, says);
+        assert_clean_failure(&out, 1, &format!("{name}.yaml"));
+        assert!(!bag.join("metadata.yaml").exists(), "{name}: nothing written");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -38,6 +38,7 @@ pub mod eval;
 pub mod fuse;
 pub mod geom;
 pub mod image;
+pub mod limits;
 pub mod mesh;
 pub mod pose;
 pub mod register;

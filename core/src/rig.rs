@@ -96,7 +96,58 @@ pub struct Rig {
     pub cameras: Vec<RigCamera>,
 }
 
+/// Whether `name` is a valid ROS name token (a namespace or frame prefix): a letter, then
+/// letters, digits and underscores.
+pub fn valid_ros_token(name: &str) -> bool {
+    let mut c = name.chars();
+    c.next().is_some_and(|f| f.is_ascii_alphabetic()) && c.all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+}
+
 impl Rig {
+    /// Checks what every reader of a rig file relies on: at least one camera, unique camera
+    /// names that are valid ROS names, image sizes within [`crate::limits::IMAGE_SIDE_PX`],
+    /// valid intrinsics, finite placements with unit quaternions, and a laser plane with a unit
+    /// normal. The message names the camera and the field.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.cameras.is_empty() {
+            return Err("cameras: none (a rig needs at least one camera)".into());
+        }
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        for (i, c) in self.cameras.iter().enumerate() {
+            let at = format!("cameras[{i}] ({:?})", c.name);
+            if !valid_ros_token(&c.name) {
+                return Err(format!("{at}: name is not a valid ROS name (a letter, then letters, digits or _)"));
+            }
+            if let Some(j) = self.cameras[..i].iter().position(|o| o.name == c.name) {
+                return Err(format!("{at}: the name is used by cameras[{j}] too (each camera needs its own topics)"));
+            }
+            for (what, v) in [("width", c.width), ("height", c.height)] {
+                if !crate::limits::image_side_ok(v) {
+                    return Err(format!("{at}: {what} {v} is not in {}", crate::limits::image_side_text()));
+                }
+            }
+            c.model().map_err(|e| format!("{at}: {e}"))?;
+            if !finite(&c.translation) {
+                return Err(format!("{at}: translation {:?} is not finite", c.translation));
+            }
+            let norm = c.rotation.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if !finite(&c.rotation) || (norm - 1.0).abs() > 1e-3 {
+                return Err(format!(
+                    "{at}: rotation {:?} is not a unit quaternion [x, y, z, w] (norm {norm})",
+                    c.rotation
+                ));
+            }
+        }
+        let n = (self.laser_plane[..3].iter().map(|x| x * x).sum::<f64>()).sqrt();
+        if !finite(&self.laser_plane) || (n - 1.0).abs() > 1e-3 {
+            return Err(format!("laser_plane {:?}: [nx, ny, nz, d] with a unit normal", self.laser_plane));
+        }
+        if !finite(&self.laser_source) {
+            return Err(format!("laser_source {:?} is not finite", self.laser_source));
+        }
+        Ok(())
+    }
+
     /// The study's two-camera arrangement (thesis section 6.1: cameras 30 degrees from the
     /// vertical, on opposite sides of the fan beam), at the given image size. `cam1` sits behind
     /// the beam on the -X side, `cam2` ahead of it on the +X side, both 0.8 m above the tabletop;
@@ -131,5 +182,31 @@ impl Rig {
     /// The camera of that name.
     pub fn camera(&self, name: &str) -> Option<&RigCamera> {
         self.cameras.iter().find(|c| c.name == name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn validation_names_the_camera_and_field() {
+        assert_eq!(Rig::study(640, 480).validate(), Ok(()));
+        let bad = |f: &dyn Fn(&mut Rig), says: &str| {
+            let mut r = Rig::study(640, 480);
+            f(&mut r);
+            let e = r.validate().unwrap_err();
+            assert!(e.contains(says), "{says}: {e}");
+        };
+        bad(&|r| r.cameras.clear(), "cameras: none");
+        bad(&|r| r.cameras[1].name = "cam1".into(), "used by cameras[0]");
+        bad(&|r| r.cameras[0].name = "cam 1/x".into(), "not a valid ROS name");
+        bad(&|r| r.cameras[0].rotation = [0.0; 4], "not a unit quaternion");
+        bad(&|r| r.cameras[0].rotation = [0.5, 0.5, 0.5, 0.6], "not a unit quaternion");
+        bad(&|r| r.cameras[1].translation[2] = f64::NAN, "cameras[1] (\"cam2\"): translation");
+        bad(&|r| r.cameras[0].width = 100_000, "width 100000 is not in 32..=8192");
+        bad(&|r| r.cameras[0].fx = -1.0, "fx -1");
+        bad(&|r| r.laser_plane = [0.0, 0.0, 0.0, 0.0], "laser_plane");
+        assert!(valid_ros_token("cam_2") && !valid_ros_token("2cam") && !valid_ros_token(""));
     }
 }

@@ -14,11 +14,14 @@ pub struct RigFileError {
     pub what: String,
 }
 
-/// Reads a rig file.
+/// Reads a rig file and validates it ([`Rig::validate`]): every reader refuses the same rigs.
 pub fn read(path: &Path) -> Result<Rig, RigFileError> {
     let err = |what: String| RigFileError { file: path.to_path_buf(), what };
     let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
-    serde_yaml::from_str(&text).map_err(|e| err(format!("not a rig file (see launch-config/rig_study.yaml): {e}")))
+    let rig: Rig = serde_yaml::from_str(&text)
+        .map_err(|e| err(format!("not a rig file (see launch-config/rig_study.yaml): {e}")))?;
+    rig.validate().map_err(err)?;
+    Ok(rig)
 }
 
 /// Writes a rig file atomically; each line of `header` becomes a comment above it.
@@ -44,6 +47,12 @@ mod tests {
         std::fs::write(dir.join("bad.yaml"), "cameras: 3\n").unwrap();
         let e = read(&dir.join("bad.yaml")).unwrap_err().to_string();
         assert!(e.contains("bad.yaml") && e.contains("not a rig file"), "{e}");
+        // Parsed but invalid: refused with the file, the camera and the field.
+        let mut dup = rig.clone();
+        dup.cameras[1].name = "cam1".into();
+        write(&dir.join("dup.yaml"), &dup, "").unwrap();
+        let e = read(&dir.join("dup.yaml")).unwrap_err().to_string();
+        assert!(e.contains("dup.yaml") && e.contains("cameras[1] (\"cam1\")"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

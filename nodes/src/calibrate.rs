@@ -104,20 +104,32 @@ impl Opts {
     fn num(&self, name: &str, default: f64) -> anyhow::Result<f64> {
         match self.get(name) {
             None => Ok(default),
-            Some(v) => v.parse().map_err(|_| usage(format!("{name}: {v:?} is not a number"))),
+            Some(v) => match v.parse::<f64>() {
+                Ok(x) if x.is_finite() => Ok(x),
+                Ok(_) => Err(usage(format!("{name}: {v:?} is not a finite number"))),
+                Err(_) => Err(usage(format!("{name}: {v:?} is not a number"))),
+            },
         }
     }
     fn board(&self) -> anyhow::Result<BoardSpec> {
         let square = self.need("--square")?;
-        let square: f64 =
-            square.parse().map_err(|_| usage(format!("--square: {square:?} is not a number (metres)")))?;
+        let square: f64 = square
+            .parse()
+            .ok()
+            .filter(|s: &f64| s.is_finite())
+            .ok_or_else(|| usage(format!("--square: {square:?} is not a number (metres)")))?;
         BoardSpec::parse(self.need("--board")?, square).map_err(|e| usage(format!("--board/--square: {e}")))
     }
 }
 
+/// A comma-separated list of finite numbers (NaN and infinities are refused by name).
 fn list(name: &str, v: &str) -> anyhow::Result<Vec<f64>> {
     v.split(',')
-        .map(|s| s.trim().parse::<f64>().map_err(|_| usage(format!("{name}: {s:?} in {v:?} is not a number"))))
+        .map(|s| match s.trim().parse::<f64>() {
+            Ok(x) if x.is_finite() => Ok(x),
+            Ok(_) => Err(usage(format!("{name}: {s:?} in {v:?} is not a finite number"))),
+            Err(_) => Err(usage(format!("{name}: {s:?} in {v:?} is not a number"))),
+        })
         .collect()
 }
 
@@ -659,8 +671,8 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
         ),
         None => return Err(usage("--size: expected WxH")),
     };
-    if !(160..=4096).contains(&w) || !(120..=4096).contains(&h) {
-        return Err(usage("--size: width in 160..=4096, height in 120..=4096"));
+    if !xsurf_core::limits::image_side_ok(w) || !xsurf_core::limits::image_side_ok(h) {
+        return Err(usage(format!("--size: width and height in {}", xsurf_core::limits::image_side_text())));
     }
     let board = o.get("--board").unwrap_or("9x6");
     let square = o.num("--square", 0.02765)?;
@@ -713,6 +725,14 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
         let model = cam.model()?;
         let rays = RayTable::new(&model);
         let poses = board_views(&model, &spec, count, seed + 1000 * ci as u64);
+        if poses.len() < count {
+            return Err(usage(format!(
+                "--size {w}x{h}: the {}x{} board fits in view only {} of {count} times (a larger image, or fewer --views)",
+                spec.cols,
+                spec.rows,
+                poses.len()
+            )));
+        }
         for (i, pose) in poses.iter().enumerate() {
             let img = render_board(&rays, pose, &spec, &look, &exposure, seed ^ ((ci * 100 + i) as u64));
             png(&dir.join(format!("intrinsics/{}_{i:02}.{ext}", cam.name)), &img)?;

@@ -274,11 +274,12 @@ impl Scanner {
     /// Sets up a scanner.
     pub fn new(scene: Scene, rig: Rig, laser: LaserModel, settings: ScanSettings) -> Result<Self, SynthError> {
         let bad = |name, reason: String| Err(SynthError::Invalid { name, reason });
-        if !(settings.speed_mps > 0.0 && settings.speed_mps < 10.0) {
-            return bad("speed", format!("{} m/s is not in (0, 10)", settings.speed_mps));
+        if !crate::limits::speed_ok(settings.speed_mps) {
+            let (lo, hi) = crate::limits::SPEED_MPS;
+            return bad("speed", format!("{} m/s is not in ({lo}, {hi})", settings.speed_mps));
         }
-        if !(settings.fps > 0.0 && settings.fps <= 1000.0) {
-            return bad("fps", format!("{} is not in (0, 1000]", settings.fps));
+        if !(settings.fps > 0.0 && settings.fps <= crate::limits::MAX_FPS) {
+            return bad("fps", format!("{} is not in (0, {}]", settings.fps, crate::limits::MAX_FPS));
         }
         if settings.supersample == 0 || settings.supersample > 16 {
             return bad("supersample", format!("{} is not in 1..=16", settings.supersample));

@@ -114,8 +114,11 @@ fn size(a: &Args) -> anyhow::Result<(u32, u32)> {
     let (w, h) = s.split_once('x').ok_or_else(|| usage(format!("--size {s}: expected WxH")))?;
     let (w, h): (u32, u32) =
         (w.parse().map_err(|_| usage("--size: bad width"))?, h.parse().map_err(|_| usage("--size: bad height"))?);
-    if !(32..=8192).contains(&w) || !(32..=8192).contains(&h) {
-        return Err(usage(format!("--size {s}: width and height must be in 32..=8192")));
+    if !xsurf_core::limits::image_side_ok(w) || !xsurf_core::limits::image_side_ok(h) {
+        return Err(usage(format!(
+            "--size {s}: width and height must be in {}",
+            xsurf_core::limits::image_side_text()
+        )));
     }
     Ok((w, h))
 }

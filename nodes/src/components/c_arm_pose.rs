@@ -89,8 +89,9 @@ struct Config {
 
 fn config(p: &Params) -> Result<Config, ParamError> {
     let speed = p.f64("speed")?;
-    if !(speed > 0.0 && speed < 2.0) {
-        return Err(Params::invalid("speed", format!("{speed} m/s is not in (0, 2)")));
+    if !xsurf_core::limits::speed_ok(speed) {
+        let (lo, hi) = xsurf_core::limits::SPEED_MPS;
+        return Err(Params::invalid("speed", format!("{speed} m/s is not in ({lo}, {hi})")));
     }
     let rate = p.f64("rate_hz")?;
     if !(1.0..=1000.0).contains(&rate) {

@@ -178,8 +178,8 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         let v = p.i64(n)?;
         u32::try_from(v)
             .ok()
-            .filter(|v| (16..=8192).contains(v))
-            .ok_or_else(|| Params::invalid(n, format!("{v} is not in 16..=8192")))
+            .filter(|&v| xsurf_core::limits::image_side_ok(v))
+            .ok_or_else(|| Params::invalid(n, format!("{v} is not in {}", xsurf_core::limits::image_side_text())))
     };
     let fps = p.f64("fps")?;
     if !(fps > 0.0 && fps <= 1000.0) {
