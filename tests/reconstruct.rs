@@ -583,3 +583,56 @@ fn invalid_rig_files_are_refused_before_any_work() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Outputs that could lie: a folder holding an earlier reconstruction is cleared of our files
+/// (and only ours) first; an empty `--out` and a folder given as a calibration's output file are
+/// refused before any work; `bag play` past the bag's end is refused.
+#[test]
+fn stale_outputs_and_impossible_destinations() {
+    let dir = scratch("stale");
+    let out = dir.join("o");
+    std::fs::create_dir_all(out.join("scan_7")).unwrap();
+    for f in ["cam1.ply", "cam2.ply", "merged.ply", "scan_7/merged.ply", "notes.txt"] {
+        std::fs::write(out.join(f), "old").unwrap();
+    }
+    // A bag whose cam2 has no images: the old cam2.ply must not survive beside the new result.
+    let b = dir.join("b");
+    rewrite(pyramid_bag(), &b, &[], |m| if m.topic == "/cam2/image_raw" { vec![] } else { vec![m] });
+    let _ = reconstruct(&b, &out);
+    assert!(out.join("cam1.ply").is_file() && std::fs::read(out.join("cam1.ply")).unwrap() != b"old");
+    assert!(!out.join("scan_7").exists(), "an earlier scan folder of ours is removed");
+    assert_eq!(std::fs::read_to_string(out.join("notes.txt")).unwrap(), "old", "other files are left alone");
+    if out.join("cam2.ply").exists() {
+        assert_ne!(std::fs::read(out.join("cam2.ply")).unwrap(), b"old", "no stale cam2.ply");
+    }
+    let o = xsurf(&["reconstruct", pyramid_bag().to_str().unwrap(), "--out", ""]);
+    assert_clean_failure(&o, 1, "--out: an empty path");
+    let o =
+        xsurf(&["calibrate", "intrinsics", "a.png", "--board", "9x6", "--square", "0.02", "-o", dir.to_str().unwrap()]);
+    assert_clean_failure(&o, 2, "is a folder");
+    let o = xsurf(&[
+        "calibrate",
+        "intrinsics",
+        "a.png",
+        "--board",
+        "9x6",
+        "--square",
+        "0.02",
+        "-o",
+        "/nonexistent/dir/c.yaml",
+    ]);
+    assert_clean_failure(&o, 2, "does not exist");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `bag play --start-offset` past the end: refused, before any DDS participant.
+#[test]
+fn play_past_the_end_is_refused() {
+    let netns = root().join("../shared/tools/netns-run");
+    let o = std::process::Command::new(netns)
+        .arg(env!("CARGO_BIN_EXE_xsurf"))
+        .args(["bag", "play", pyramid_bag().to_str().unwrap(), "--start-offset", "1000", "--delay", "0"])
+        .output()
+        .unwrap();
+    assert_clean_failure(&o, 1, "--start-offset 1000 s is past the end");
+}

@@ -122,6 +122,24 @@ impl Opts {
     }
 }
 
+/// The output file of a calibrate command, checked before any work: not empty, not a folder,
+/// in a folder that exists.
+fn output_file(p: &str) -> anyhow::Result<PathBuf> {
+    let path = PathBuf::from(p);
+    if p.is_empty() {
+        return Err(usage("-o: an empty path"));
+    }
+    if path.is_dir() {
+        return Err(usage(format!("-o {p}: is a folder; name the file to write (for example {p}/cam1.yaml)")));
+    }
+    if let Some(parent) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if !parent.is_dir() {
+            return Err(usage(format!("-o {p}: the folder {} does not exist", parent.display())));
+        }
+    }
+    Ok(path)
+}
+
 /// A comma-separated list of finite numbers (NaN and infinities are refused by name).
 fn list(name: &str, v: &str) -> anyhow::Result<Vec<f64>> {
     v.split(',')
@@ -176,7 +194,7 @@ fn find_board(path: &Path, spec: &BoardSpec) -> Result<(Corners, (u32, u32)), St
 fn cmd_intrinsics(args: &[String]) -> anyhow::Result<()> {
     let o = Opts::parse(args, &["--board", "--square", "-o", "--out", "--name", "--model", "--report"], None)?;
     let spec = o.board()?;
-    let out = PathBuf::from(o.get("-o").or(o.get("--out")).ok_or_else(|| usage("-o CAMERA.yaml is required"))?);
+    let out = output_file(o.get("-o").or(o.get("--out")).ok_or_else(|| usage("-o CAMERA.yaml is required"))?)?;
     let m = o.get("--model").unwrap_or("plumb_bob");
     let model = DistortionModel::parse(m)
         .ok_or_else(|| usage(format!("--model {m}: expected plumb_bob or rational_polynomial")))?;
@@ -350,9 +368,9 @@ fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
             Rig { cameras: Vec::new(), ..r }
         }
     };
-    let out = PathBuf::from(
+    let out = output_file(
         o.get("-o").or(o.get("--out")).or(o.get("--rig")).ok_or_else(|| usage("-o RIG.yaml is required"))?,
-    );
+    )?;
     if o.groups.is_empty() {
         return Err(usage("give at least one --camera NAME --intrinsics FILE --travels T IMAGE..."));
     }
@@ -455,7 +473,7 @@ fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
     let o = Opts::parse(args, &["-o", "--out", "--rig", "--report"], Some("--heights"))?;
     let rig_path = PathBuf::from(o.need("--rig")?);
     let mut rig = xsurf_formats::rig::read(&rig_path)?;
-    let out = PathBuf::from(o.get("-o").or(o.get("--out")).unwrap_or(o.need("--rig")?));
+    let out = output_file(o.get("-o").or(o.get("--out")).unwrap_or(o.need("--rig")?))?;
     if o.groups.is_empty() {
         return Err(usage("give at least one --camera NAME --heights H[,H...] IMAGE..."));
     }
@@ -557,7 +575,7 @@ fn cmd_scan(args: &[String]) -> anyhow::Result<()> {
     let [bag] = o.positional.as_slice() else { return Err(usage("calibrate scan needs one BAG")) };
     let rig_path = PathBuf::from(o.need("--rig")?);
     let mut rig = xsurf_formats::rig::read(&rig_path)?;
-    let out = PathBuf::from(o.get("-o").or(o.get("--out")).unwrap_or(o.need("--rig")?));
+    let out = output_file(o.get("-o").or(o.get("--out")).unwrap_or(o.need("--rig")?))?;
     let p = rig.laser_plane;
     let mut params = vec![format!("laser_plane:=[{}, {}, {}, {}]", p[0], p[1], p[2], p[3]), "refine:=true".into()];
     for (flag, name) in

@@ -136,6 +136,50 @@ fn image_transport(
     }
 }
 
+/// Files a reconstruction writes into its folder (besides `<cam>.ply`) and in `scan_<id>/`.
+const OUTPUT_FILES: &[&str] = &[
+    "merged.ply",
+    "scene.wrl",
+    "scene.glb",
+    "preview.png",
+    "xray.png",
+    "xray.json",
+    "surface.dcm",
+    "refinement.json",
+    "report.json",
+];
+
+/// Removes an earlier reconstruction's files from `dir` (ours only, by name: `<cam>.ply` of
+/// this bag's cameras, [`OUTPUT_FILES`], and `scan_<id>/` folders holding nothing else), so that
+/// no stale surface sits beside the new one.
+fn clear_outputs(dir: &Path, cameras: &[String]) -> anyhow::Result<()> {
+    let ours = |name: &str| OUTPUT_FILES.contains(&name) || cameras.iter().any(|c| name == format!("{c}.ply"));
+    let clear = |d: &Path| -> anyhow::Result<bool> {
+        let mut only_ours = true;
+        for e in std::fs::read_dir(d).with_context(|| format!("cannot read {}", d.display()))? {
+            let e = e?;
+            let name = e.file_name().to_string_lossy().into_owned();
+            if e.file_type()?.is_file() && ours(&name) {
+                std::fs::remove_file(e.path()).with_context(|| format!("cannot remove {}", e.path().display()))?;
+            } else {
+                only_ours = false;
+            }
+        }
+        Ok(only_ours)
+    };
+    clear(dir)?;
+    for e in std::fs::read_dir(dir)? {
+        let e = e?;
+        let name = e.file_name().to_string_lossy().into_owned();
+        let is_scan =
+            name.strip_prefix("scan_").is_some_and(|id| !id.is_empty() && id.bytes().all(|b| b.is_ascii_digit()));
+        if is_scan && e.file_type()?.is_dir() && clear(&e.path())? {
+            std::fs::remove_dir(e.path()).with_context(|| format!("cannot remove {}", e.path().display()))?;
+        }
+    }
+    Ok(())
+}
+
 /// Runs the reconstruction and writes the files and `report.json`.
 pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     let t_start = Instant::now();
@@ -198,7 +242,11 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
         }
     }
 
+    if opts.out.as_os_str().is_empty() {
+        bail!("--out: an empty path; name the folder the reconstruction is written to");
+    }
     std::fs::create_dir_all(&opts.out).with_context(|| format!("cannot create {}", opts.out.display()))?;
+    clear_outputs(&opts.out, &cameras)?;
     let mut args: Vec<String> = vec!["--ros-args".into()];
     if let Some(f) = &opts.params_file {
         if !f.is_file() {

@@ -33,6 +33,17 @@ pub fn play(dir: &Path, opts: &PlayOptions) -> anyhow::Result<u64> {
         bail!("--rate {} must be > 0", opts.rate);
     }
     let bag = Bag::open(dir)?;
+    let length_s = bag.metadata.duration_ns as f64 * 1e-9;
+    if !(opts.start_offset_s >= 0.0 && opts.start_offset_s.is_finite()) {
+        bail!("--start-offset {}: seconds from the bag's start, 0 or more", opts.start_offset_s);
+    }
+    if opts.start_offset_s > 0.0 && opts.start_offset_s >= length_s {
+        bail!(
+            "--start-offset {} s is past the end of {} ({length_s:.3} s long): nothing would be played",
+            opts.start_offset_s,
+            dir.display()
+        );
+    }
     let env = DdsEnv::from_env(|k| std::env::var(k).ok())?;
     let ctx = env.context()?;
     let mut node = dds::tool_node(&ctx, "xsurf_bag_player")?;
