@@ -145,6 +145,11 @@ fn node_executables_refuse_bad_input_with_exit_2() {
         "qos.sensor.reliability",
     );
     assert_clean_failure(&run(ed, &["stray"], &[]), 2, "unexpected arguments");
+    // Numbers are echoed as written, not at full binary length (1e308 was 309 digits).
+    let pose = env!("CARGO_BIN_EXE_c_arm_pose");
+    let out = run(pose, &["--ros-args", "-p", "speed:=1e308"], &[]);
+    assert_clean_failure(&out, 2, "parameter speed: 1e308 m/s is not in (0.0, 2.0)");
+    assert!(out.stderr.len() < 200, "{}", String::from_utf8_lossy(&out.stderr));
     let tr = env!("CARGO_BIN_EXE_triangulator");
     assert_clean_failure(
         &run(tr, &["--ros-args", "--params-file", "/nonexistent/p.yaml"], &[]),

@@ -91,11 +91,11 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     let speed = p.f64("speed")?;
     if !xsurf_core::limits::speed_ok(speed) {
         let (lo, hi) = xsurf_core::limits::SPEED_MPS;
-        return Err(Params::invalid("speed", format!("{speed} m/s is not in ({lo}, {hi})")));
+        return Err(Params::invalid("speed", format!("{speed:?} m/s is not in ({lo:?}, {hi:?})")));
     }
     let rate = p.f64("rate_hz")?;
     if !(1.0..=1000.0).contains(&rate) {
-        return Err(Params::invalid("rate_hz", format!("{rate} is not in [1, 1000]")));
+        return Err(Params::invalid("rate_hz", format!("{rate:?} is not in [1, 1000]")));
     }
     let rig_file = p.string("rig_file")?;
     let rig = if rig_file.is_empty() {
@@ -128,7 +128,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         end: p.f64("travel_end_m")?,
         auto_start: p.bool("auto_start")?,
         delay_ns: (p.f64("start_delay_s")?.max(0.0) * 1e9) as i64,
-        scan_id: u32::try_from(id).map_err(|_| Params::invalid("scan_id", format!("{id} is not a u32")))?,
+        scan_id: u32::try_from(id).map_err(|_| Params::invalid("scan_id", format!("{id:?} is not a u32")))?,
         period_ns: (1e9 / rate) as i64,
         rig,
         table_frame: p.string("table_frame")?,

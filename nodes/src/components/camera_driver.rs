@@ -155,7 +155,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
             }
             let offset = p.f64("stamp_offset_s")?;
             if !(0.0..=1.0).contains(&offset) {
-                return Err(Params::invalid("stamp_offset_s", format!("{offset} is not in [0, 1]")));
+                return Err(Params::invalid("stamp_offset_s", format!("{offset:?} is not in [0, 1]")));
             }
             Source::V4l2 { device: device.into(), offset_ns: (offset * 1e9).round() as i64 }
         }
@@ -183,7 +183,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     };
     let fps = p.f64("fps")?;
     if !(fps > 0.0 && fps <= 1000.0) {
-        return Err(Params::invalid("fps", format!("{fps} is not in (0, 1000]")));
+        return Err(Params::invalid("fps", format!("{fps:?} is not in (0, 1000]")));
     }
     let enc = p.string("encoding")?;
     let encoding = match enc.as_str() {
@@ -202,7 +202,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
             let q = u8::try_from(q)
                 .ok()
                 .filter(|q| (1..=100).contains(q))
-                .ok_or_else(|| Params::invalid("jpeg_quality", format!("{q} is not in 1..=100")))?;
+                .ok_or_else(|| Params::invalid("jpeg_quality", format!("{q:?} is not in 1..=100")))?;
             Some((codec, q))
         }
         other => return Err(Params::invalid("image_transport", format!("{other:?}: raw or compressed"))),

@@ -147,7 +147,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     }
     let delay = p.f64("merge_delay_s")?;
     if !(0.0..=600.0).contains(&delay) {
-        return Err(Params::invalid("merge_delay_s", format!("{delay} is not in [0, 600]")));
+        return Err(Params::invalid("merge_delay_s", format!("{delay:?} is not in [0, 600]")));
     }
     let mesh = MeshConfig {
         max_edge_m: p.f64("max_edge_m")? as f32,
@@ -157,11 +157,11 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     mesh.validate().map_err(|e| Params::invalid("merger", e))?;
     let fuse = p.f64("fuse_distance_m")?;
     if !(0.0..=0.05).contains(&fuse) {
-        return Err(Params::invalid("fuse_distance_m", format!("{fuse} is not in [0, 0.05]")));
+        return Err(Params::invalid("fuse_distance_m", format!("{fuse:?} is not in [0, 0.05]")));
     }
     let transparency = p.f64("transparency")?;
     if !(0.0..=1.0).contains(&transparency) {
-        return Err(Params::invalid("transparency", format!("{transparency} is not in [0, 1]")));
+        return Err(Params::invalid("transparency", format!("{transparency:?} is not in [0, 1]")));
     }
     let dir = p.string("output_dir")?;
     let plane = p.f64_array("laser_plane")?;
@@ -198,7 +198,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         republish_ns: {
             let r = p.f64("republish_s")?;
             if !(0.0..=3600.0).contains(&r) {
-                return Err(Params::invalid("republish_s", format!("{r} is not in [0, 3600]")));
+                return Err(Params::invalid("republish_s", format!("{r:?} is not in [0, 3600]")));
             }
             (r > 0.0).then_some((r * 1e9) as i64)
         },

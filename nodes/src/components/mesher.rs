@@ -97,22 +97,22 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         min_angle_deg: p.f64("min_angle_deg")? as f32,
         fill_single_holes: p.bool("fill_single_holes")?,
         smooth_iterations: u32::try_from(smooth)
-            .map_err(|_| Params::invalid("smooth_iterations", format!("{smooth} < 0")))?,
+            .map_err(|_| Params::invalid("smooth_iterations", format!("{smooth:?} < 0")))?,
         smooth_lambda: p.f64("smooth_lambda")? as f32,
     };
     mesh.validate().map_err(|e| Params::invalid("mesher", e))?;
     let rate = p.f64("cloud_rate_hz")?;
     if !(0.0..=1000.0).contains(&rate) {
-        return Err(Params::invalid("cloud_rate_hz", format!("{rate} is not in [0, 1000]")));
+        return Err(Params::invalid("cloud_rate_hz", format!("{rate:?} is not in [0, 1000]")));
     }
     let gap_factor = p.f64("gap_factor")?;
     if !(gap_factor > 1.0) {
-        return Err(Params::invalid("gap_factor", format!("{gap_factor} must be > 1")));
+        return Err(Params::invalid("gap_factor", format!("{gap_factor:?} must be > 1")));
     }
     let dir = p.string("output_dir")?;
     let republish = p.f64("mesh_republish_s")?;
     if !(0.0..=3600.0).contains(&republish) {
-        return Err(Params::invalid("mesh_republish_s", format!("{republish} is not in [0, 3600]")));
+        return Err(Params::invalid("mesh_republish_s", format!("{republish:?} is not in [0, 3600]")));
     }
     Ok(Config {
         mesh,

@@ -89,19 +89,19 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     }
     let angle = p.f64("min_ray_plane_angle_deg")?;
     if !(0.0..90.0).contains(&angle) {
-        return Err(Params::invalid("min_ray_plane_angle_deg", format!("{angle} is not in [0, 90)")));
+        return Err(Params::invalid("min_ray_plane_angle_deg", format!("{angle:?} is not in [0, 90)")));
     }
     let (lo, hi) = (p.f64("min_z_m")?, p.f64("max_z_m")?);
     if !(lo < hi) {
-        return Err(Params::invalid("max_z_m", format!("{hi} must be above min_z_m {lo}")));
+        return Err(Params::invalid("max_z_m", format!("{hi:?} must be above min_z_m {lo:?}")));
     }
     let gap = p.f64("max_pose_gap_s")?;
     if !(gap > 0.0 && gap < 3600.0) {
-        return Err(Params::invalid("max_pose_gap_s", format!("{gap} is not in (0, 3600)")));
+        return Err(Params::invalid("max_pose_gap_s", format!("{gap:?} is not in (0, 3600)")));
     }
     let pending = p.i64("max_pending")?;
     if !(1..=100_000).contains(&pending) {
-        return Err(Params::invalid("max_pending", format!("{pending} is not in 1..=100000")));
+        return Err(Params::invalid("max_pending", format!("{pending:?} is not in 1..=100000")));
     }
     Ok(Config {
         tri: TriangulatorConfig {
@@ -118,7 +118,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         max_extrapolation_ns: {
             let e = p.f64("max_extrapolation_s")?;
             if !(0.0..=0.1).contains(&e) {
-                return Err(Params::invalid("max_extrapolation_s", format!("{e} is not in [0, 0.1]")));
+                return Err(Params::invalid("max_extrapolation_s", format!("{e:?} is not in [0, 0.1]")));
             }
             (e * 1e9) as i64
         },

@@ -159,11 +159,11 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     let center = p.f64("center_column")?;
     let crop = p.f64("crop_threshold")?;
     if !(0.0..1.0).contains(&crop) {
-        return Err(Params::invalid("crop_threshold", format!("{crop} is not in [0, 1)")));
+        return Err(Params::invalid("crop_threshold", format!("{crop:?} is not in [0, 1)")));
     }
     let (wc, ww) = (p.f64("window_center")?, p.f64("window_width")?);
     if !(ww >= 0.0) {
-        return Err(Params::invalid("window_width", format!("{ww} must be >= 0")));
+        return Err(Params::invalid("window_width", format!("{ww:?} must be >= 0")));
     }
     let dicom_timing = match p.string("exposure_timing")?.as_str() {
         "events" => false,
