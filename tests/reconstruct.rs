@@ -350,6 +350,24 @@ fn a_miscalibrated_camera_is_refined_and_saved_to_the_rig_file() {
     assert!(dr_deg < 0.1 && dt_mm < 2.0, "{dt_mm} mm / {dr_deg} deg");
     assert_eq!(rig.camera("cam1"), truth.camera("cam1"));
     assert_eq!(rig.laser_plane, truth.laser_plane);
+    // A refined placement that cannot be saved is not a success: exit 3, the files still written.
+    let params = dir.join("unsaved.yaml");
+    std::fs::write(
+        &params,
+        format!("{base}\n/merger:\n  ros__parameters:\n    save_rig_file: /nonexistent/dir/rig.yaml\n"),
+    )
+    .unwrap();
+    let o = xsurf(&[
+        "reconstruct",
+        bag.to_str().unwrap(),
+        "--params-file",
+        params.to_str().unwrap(),
+        "--out",
+        dir.join("unsaved").to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert_clean_failure(&o, 3, "/merger: 1 file(s) could not be written");
+    assert!(dir.join("unsaved/merged.ply").is_file());
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -510,6 +510,14 @@ impl Report {
         for (topic, n) in &self.undecodable {
             v.push(format!("{n} message(s) on {topic} could not be decoded"));
         }
+        for n in &self.nodes {
+            if let Some(&k) = n.counters.get("write_errors").filter(|&&k| k > 0) {
+                v.push(format!(
+                    "{}: {k} file(s) could not be written (the refined rig, surfaces; see the log)",
+                    n.node
+                ));
+            }
+        }
         v
     }
 }

@@ -223,6 +223,8 @@ pub struct MergerNode {
     last_merge: Option<LastMerge>,
     merged_current: bool,
     bad_overlays: u64,
+    /// Files (surfaces, refinement.json, the rig) that could not be written.
+    write_errors: u64,
     fused_dropped: u64,
     refinements: u64,
     refinements_refused: u64,
@@ -252,6 +254,7 @@ impl MergerNode {
             last_merge: None,
             merged_current: false,
             bad_overlays: 0,
+            write_errors: 0,
             fused_dropped: 0,
             refinements: 0,
             refinements_refused: 0,
@@ -427,7 +430,7 @@ impl MergerNode {
     }
 
     /// Writes refined placements into `save_rig_file`.
-    fn save_rig(&self, refined: &[(String, Iso3)]) {
+    fn save_rig(&mut self, refined: &[(String, Iso3)]) {
         let Some(path) = &self.cfg.save_rig_file else { return };
         let result = (|| -> anyhow::Result<()> {
             let mut rig = xsurf_formats::rig::read(path)?;
@@ -450,15 +453,19 @@ impl MergerNode {
         })();
         match result {
             Ok(()) => log::info!("merger: refined placement saved to {}", path.display()),
-            Err(e) => log::error!("merger: save_rig_file {}: {e:#}", path.display()),
+            Err(e) => {
+                self.write_errors += 1;
+                log::error!("merger: save_rig_file {}: {e:#}", path.display());
+            }
         }
     }
 
-    fn write(&self, scan_id: u32, merged: &Mesh, meshes: &[(String, Mesh)], refinement: &[serde_json::Value]) {
+    fn write(&mut self, scan_id: u32, merged: &Mesh, meshes: &[(String, Mesh)], refinement: &[serde_json::Value]) {
         if let Some(dir) = &self.cfg.output_dir {
             let dir = dir.join(format!("scan_{scan_id}"));
             let plane = self.overlays.get(&scan_id);
             if let Err(e) = write_files(&dir, merged, meshes, plane, self.cfg.transparency) {
+                self.write_errors += 1;
                 log::error!("merger: cannot write files in {}: {e}", dir.display());
             }
             if !refinement.is_empty() {
@@ -467,6 +474,7 @@ impl MergerNode {
                     serde_json::to_string_pretty(&serde_json::json!({ "scan_id": scan_id, "cameras": refinement }))
                         .unwrap_or_default();
                 if let Err(e) = xsurf_formats::write_bytes_atomic(&path, text.as_bytes()) {
+                    self.write_errors += 1;
                     log::error!("merger: cannot write {}: {e}", path.display());
                 }
             }
@@ -483,11 +491,12 @@ impl MergerNode {
         while self.overlays.len() > 4 {
             self.overlays.pop_first();
         }
-        if let Some((id, merged, meshes)) = &self.last_merge {
-            if *id == scan_id {
+        if let Some((id, merged, meshes)) = self.last_merge.take() {
+            if id == scan_id {
                 log::info!("merger: scan {scan_id}: radiograph arrived after the merge; scene files rewritten");
-                self.write(scan_id, merged, meshes, &[]);
+                self.write(scan_id, &merged, &meshes, &[]);
             }
+            self.last_merge = Some((id, merged, meshes));
         }
         Ok(())
     }
@@ -683,6 +692,7 @@ impl Component for MergerNode {
             ("refinements", self.refinements),
             ("refinements_refused", self.refinements_refused),
             ("seam_triangles", self.seam_triangles),
+            ("write_errors", self.write_errors),
         ]
     }
 }
