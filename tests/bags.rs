@@ -181,3 +181,36 @@ fn compressed_images_written_by_python_decode_to_pillows_pixels() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `bag info` checks the storage itself, not only metadata.yaml: a recording cut short and bytes
+/// that are not MCAP are refused with the file and the offset. `synth` writes its bag under a
+/// temporary name, renamed when complete, and refuses a non-empty folder up front.
+#[test]
+fn bag_info_checks_the_mcap_and_synth_leaves_no_half_bag() {
+    let dir = scratch("bag-info");
+    let bag = dir.join("b");
+    copy_bag(pyramid_bag(), &bag);
+    let mcap = std::fs::read_dir(&bag)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .unwrap();
+    let bytes = std::fs::read(&mcap).unwrap();
+    std::fs::write(&mcap, &bytes[..bytes.len() / 2]).unwrap();
+    let out = xsurf(&["bag", "info", bag.to_str().unwrap()]);
+    assert_clean_failure(&out, 1, &format!("MCAP error at byte offset {}", bytes.len() / 2 - 8));
+    assert_clean_failure(&out, 1, "cut short");
+    std::fs::write(&mcap, b"these bytes are not an MCAP file at all").unwrap();
+    assert_clean_failure(&xsurf(&["bag", "info", bag.to_str().unwrap()]), 1, "not an MCAP file");
+    // A non-empty folder is refused before any work; a good run leaves no partial folder.
+    let out = xsurf(&["synth", "pyramid", "-o", bag.to_str().unwrap(), "--size", "160x120"]);
+    assert_clean_failure(&out, 1, "exists and is not empty");
+    let fresh = dir.join("fresh");
+    let out = xsurf(&["synth", "pyramid", "-o", fresh.to_str().unwrap(), "--size", "160x120", "--speed", "0.14"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(fresh.join("fresh_0.mcap").is_file() && fresh.join("metadata.yaml").is_file());
+    assert!(!dir.join(".fresh.partial").exists());
+    let out = xsurf(&["bag", "info", fresh.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -142,6 +142,13 @@ fn mcap_err(path: &Path, offset: u64, e: impl std::fmt::Display) -> BagError {
 impl BagWriter {
     /// Creates the bag directory (which must not exist or be empty) and its MCAP file.
     pub fn create(dir: &Path, options: BagOptions) -> Result<Self, BagError> {
+        let stem = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "bag".into());
+        Self::create_with_stem(dir, &stem, options)
+    }
+
+    /// As [`BagWriter::create`], with the storage file named `<stem>_0.mcap` whatever the
+    /// folder is called (a bag written under a temporary name and renamed when complete).
+    pub fn create_with_stem(dir: &Path, stem: &str, options: BagOptions) -> Result<Self, BagError> {
         if dir.exists() {
             let empty = std::fs::read_dir(dir).map_err(|e| FileError::new(dir, e))?.next().is_none();
             if !empty {
@@ -149,7 +156,6 @@ impl BagWriter {
             }
         }
         std::fs::create_dir_all(dir).map_err(|e| FileError::new(dir, e))?;
-        let stem = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "bag".into());
         let file_name = format!("{stem}_0.mcap");
         let path = dir.join(&file_name);
         let file = std::fs::File::create(&path).map_err(|e| FileError::new(&path, e))?;
@@ -449,6 +455,37 @@ impl Bag {
             }
         }
         Ok(Bag { dir: dir.to_path_buf(), metadata })
+    }
+
+    /// Checks that every storage file is a whole MCAP file: the magic at its start and at its
+    /// end (a bag cut short, or bytes that are not MCAP, are named with the offset).
+    pub fn verify_storage(&self) -> Result<(), BagError> {
+        use std::io::{Read, Seek, SeekFrom};
+        const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+        for f in &self.metadata.files {
+            let path = self.dir.join(f);
+            let bad = |offset: u64, reason: String| BagError::Mcap { path: path.clone(), offset, reason };
+            let mut file = std::fs::File::open(&path).map_err(|e| FileError::new(&path, e))?;
+            let len = file.metadata().map_err(|e| FileError::new(&path, e))?.len();
+            if len < 16 {
+                return Err(bad(0, format!("{len} bytes: too short for an MCAP file")));
+            }
+            let mut head = [0u8; 8];
+            file.read_exact(&mut head).map_err(|e| FileError::new(&path, e))?;
+            if &head != MAGIC {
+                return Err(bad(0, "does not start with the MCAP magic: not an MCAP file".into()));
+            }
+            let mut tail = [0u8; 8];
+            file.seek(SeekFrom::End(-8)).map_err(|e| FileError::new(&path, e))?;
+            file.read_exact(&mut tail).map_err(|e| FileError::new(&path, e))?;
+            if &tail != MAGIC {
+                return Err(bad(
+                    len - 8,
+                    "no MCAP magic at the end: the file is cut short (a recording that did not finish)".into(),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Total size of the storage files, bytes.

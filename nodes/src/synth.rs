@@ -53,8 +53,47 @@ fn put<M: RosMessage>(w: &mut BagWriter, topic: &str, t: i64, m: &M) -> anyhow::
 /// The cameras' images are `sensor_msgs/Image` on `/<cam>/image_raw`, or with `compressed`
 /// (codec, JPEG quality) `sensor_msgs/CompressedImage` on `/<cam>/image_raw/compressed`, as
 /// image_transport's compressed plugin records them.
+///
+/// The bag is written under a temporary name beside `dir` (`.<name>.partial`) and renamed when
+/// it is complete, with its radiograph and truth: a failed run leaves no half-written bag.
 pub fn write_bag(
     dir: &Path,
+    scanner: &Scanner,
+    zstd: bool,
+    scan_id: u32,
+    compressed: Option<(Codec, u8)>,
+    progress: impl FnMut(u32, u32),
+) -> anyhow::Result<SynthSummary> {
+    let name = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .ok_or_else(|| anyhow::anyhow!("{}: not a folder name for a bag", dir.display()))?;
+    if dir.exists() && std::fs::read_dir(dir).with_context(|| format!("{}", dir.display()))?.next().is_some() {
+        anyhow::bail!("{} exists and is not empty: choose a new folder for the bag", dir.display());
+    }
+    let partial = dir.with_file_name(format!(".{name}.partial"));
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial).with_context(|| format!("cannot clear {}", partial.display()))?;
+    }
+    match write_bag_into(&partial, &name, scanner, zstd, scan_id, compressed, progress) {
+        Ok(summary) => {
+            if dir.exists() {
+                std::fs::remove_dir(dir).with_context(|| format!("cannot replace {}", dir.display()))?;
+            }
+            std::fs::rename(&partial, dir)
+                .with_context(|| format!("cannot rename {} to {}", partial.display(), dir.display()))?;
+            Ok(summary)
+        }
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&partial);
+            Err(e)
+        }
+    }
+}
+
+fn write_bag_into(
+    dir: &Path,
+    stem: &str,
     scanner: &Scanner,
     zstd: bool,
     scan_id: u32,
@@ -62,7 +101,7 @@ pub fn write_bag(
     mut progress: impl FnMut(u32, u32),
 ) -> anyhow::Result<SynthSummary> {
     let rig = &scanner.rig;
-    let mut w = BagWriter::create(dir, BagOptions { zstd })?;
+    let mut w = BagWriter::create_with_stem(dir, stem, BagOptions { zstd })?;
     for c in &rig.cameras {
         match compressed {
             None => {

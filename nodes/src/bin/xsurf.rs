@@ -416,6 +416,7 @@ fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
         Some("info") => {
             let [dir] = &args[1..] else { return Err(usage("bag info needs one DIR")) };
             let bag = xsurf_formats::bag::Bag::open(Path::new(dir))?;
+            bag.verify_storage()?;
             print!("{}", bag.info());
             Ok(())
         }
