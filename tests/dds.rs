@@ -145,6 +145,25 @@ fn node_executables_refuse_bad_input_with_exit_2() {
         "qos.sensor.reliability",
     );
     assert_clean_failure(&run(ed, &["stray"], &[]), 2, "unexpected arguments");
+    // Help and version, without DDS: the topics and every declared parameter.
+    for node in ["edge_detector", "triangulator", "c_arm_pose", "camera_driver"] {
+        let bin = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).with_file_name(node);
+        let out = run(bin.to_str().unwrap(), &["--help"], &[]);
+        assert!(out.status.success(), "{node} --help");
+        let text = String::from_utf8_lossy(&out.stdout);
+        for d in xsurf_nodes::components::declarations(node).unwrap() {
+            assert!(text.contains(&format!("  {} (", d.name)), "{node} --help lacks {}:\n{text}", d.name);
+        }
+        assert!(text.contains("publishes:") && text.contains("services:"), "{text}");
+        let v = run(bin.to_str().unwrap(), &["--version"], &[]);
+        assert!(v.status.success() && String::from_utf8_lossy(&v.stdout).starts_with(node));
+    }
+    let out = run(ed, &["--help"], &[]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("image_raw                    sensor_msgs/msg/Image"));
+    let out = xsurf(&["compose", "--help"]);
+    assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("node types: camera_driver"));
+    let out = xsurf(&["--version"]);
+    assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), format!("xsurf {}", env!("CARGO_PKG_VERSION")));
     // Numbers are echoed as written, not at full binary length (1e308 was 309 digits).
     let pose = env!("CARGO_BIN_EXE_c_arm_pose");
     let out = run(pose, &["--ros-args", "-p", "speed:=1e308"], &[]);

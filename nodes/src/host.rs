@@ -79,9 +79,49 @@ fn host(who: &str, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> ExitCode {
     }
 }
 
+/// The `--help` of a node executable: usage, topics (as a node with default parameters has
+/// them; relative names are placed in the node's namespace), parameters from the same
+/// declarations the node uses, and services.
+pub fn node_help(node: &str) -> String {
+    use std::fmt::Write;
+    let mut s = format!(
+        "{node} {} (xsurf; documented in nodes/README.md)\n\nusage: {node} [--ros-args [-r __ns:=/NS] [-r __node:=NAME] [-r FROM:=TO] [-p NAME:=VALUE] [--params-file FILE] [--log-level LEVEL]]\n",
+        env!("CARGO_PKG_VERSION")
+    );
+    let decls = crate::components::declarations(node).unwrap_or_default();
+    if let Ok(c) = Params::resolve(&decls, &Default::default()).and_then(|p| crate::components::build(node, &p)) {
+        let ports = |title: &str, ports: Vec<xsurf_runtime::component::Port>, s: &mut String| {
+            let _ = writeln!(s, "\n{title}:");
+            for p in ports {
+                let _ = writeln!(s, "  {:28} {} ({:?})", p.topic, p.type_name, p.qos);
+            }
+        };
+        ports("subscribes (with default parameters)", c.inputs(), &mut s);
+        ports("publishes", c.outputs(), &mut s);
+    }
+    let _ = writeln!(s, "\nparameters (name, type, default, unit: meaning):");
+    for d in &decls {
+        let unit = if d.unit.is_empty() { String::new() } else { format!(" {}", d.unit) };
+        let _ = writeln!(s, "  {} ({}, default {}{unit}): {}", d.name, d.default.type_name(), d.default, d.description);
+    }
+    let _ = writeln!(
+        s,
+        "  use_sim_time (bool, default false): stamps from /clock\n  qos.sensor.*, qos.reliable.*: QoS overrides of the topic classes (nodes/README.md)\n\nservices: ~/list_parameters, ~/get_parameters, ~/set_parameters, ~/set_parameters_atomically,\n  ~/describe_parameters, ~/get_parameter_types (rcl_interfaces, as `ros2 param` uses them)"
+    );
+    s
+}
+
 /// Runs the node `node` with this process's arguments.
 pub fn main(node: &'static str) -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().is_some_and(|a| a == "--help" || a == "-h") {
+        print!("{}", node_help(node));
+        return ExitCode::SUCCESS;
+    }
+    if args.first().is_some_and(|a| a == "--version") {
+        println!("{node} {}", env!("CARGO_PKG_VERSION"));
+        return ExitCode::SUCCESS;
+    }
     let ros = match parse(node, &args) {
         Ok(r) => r,
         Err(code) => return code,

@@ -463,6 +463,18 @@ fn cmd_launch(args: &[String]) -> ExitCode {
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().is_some_and(|a| a == "--version" || a == "-V") {
+        println!("xsurf {}", env!("CARGO_PKG_VERSION"));
+        return ExitCode::SUCCESS;
+    }
+    // `xsurf compose --help`: how to compose, and the node types.
+    if args.first().is_some_and(|a| a == "compose") && args.iter().skip(1).any(|a| a == "--help" || a == "-h") {
+        println!(
+            "usage: xsurf compose /NS/NODE_TYPE... | /NS/NAME=NODE_TYPE... [--ros-args ...]\n  run several nodes in one process, connected in memory, every topic still on DDS\n  node types: {}\n  example: xsurf compose /cam1/edge_detector /cam1/triangulator --ros-args --params-file params.yaml\n  each node's topics and parameters: <node_type> --help (for example edge_detector --help)",
+            xsurf_nodes::components::NODE_NAMES.join(", ")
+        );
+        return ExitCode::SUCCESS;
+    }
     // `xsurf CMD --help` (or -h) anywhere: the usage, exit 0.
     if args.iter().any(|a| a == "--help" || a == "-h") && args.first().map(String::as_str) != Some("compose") {
         println!("{USAGE}");
