@@ -259,14 +259,27 @@ fn no_tf_for_a_camera_frame() {
 
 #[test]
 fn usage_errors_exit_2() {
-    assert_clean_failure(&xsurf(&["reconstruct"]), 2, "reconstruct needs one BAG");
+    let out = xsurf(&["reconstruct"]);
+    assert_clean_failure(&out, 2, "reconstruct needs one BAG");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("xsurf reconstruct BAG") && !err.contains("xsurf synth"), "its own usage only: {err}");
     assert_clean_failure(&xsurf(&["reconstruct", "x", "--bogus"]), 2, "unknown option --bogus");
     assert_clean_failure(&xsurf(&["synth", "teapot", "-o", "/tmp/x"]), 2, "unknown scene \"teapot\"");
     assert_clean_failure(&xsurf(&["frobnicate"]), 2, "unknown command");
-    for cmd in [&["--help"][..], &["reconstruct", "--help"], &["launch", "-h"], &["bag", "info", "--help"]] {
+    // Each command's own usage; the whole list with no command.
+    for (cmd, has, lacks) in [
+        (&["--help"][..], "xsurf reconstruct BAG", ""),
+        (&["reconstruct", "--help"], "xsurf reconstruct BAG", "xsurf synth"),
+        (&["launch", "-h"], "xsurf launch FILE", "xsurf reconstruct"),
+        (&["bag", "info", "--help"], "xsurf bag info DIR", "xsurf bag play"),
+        (&["bag", "--help"], "xsurf bag play DIR", "xsurf reconstruct"),
+        (&["calibrate", "laser", "--help"], "xsurf calibrate laser --rig", "calibrate intrinsics"),
+    ] {
         let out = xsurf(cmd);
+        let text = String::from_utf8_lossy(&out.stdout);
         assert!(out.status.success(), "{cmd:?}");
-        assert!(String::from_utf8_lossy(&out.stdout).contains("xsurf reconstruct BAG"), "{cmd:?}");
+        assert!(text.contains(has), "{cmd:?}: {text}");
+        assert!(lacks.is_empty() || !text.contains(lacks), "{cmd:?}: {text}");
     }
 }
 

@@ -115,7 +115,9 @@ pub fn node_help(node: &str) -> String {
 pub fn main(node: &'static str) -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.first().is_some_and(|a| a == "--help" || a == "-h") {
-        print!("{}", node_help(node));
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
+        let _ = out.write_all(node_help(node).as_bytes()).and_then(|()| out.flush());
         return ExitCode::SUCCESS;
     }
     if args.first().is_some_and(|a| a == "--version") {

@@ -63,6 +63,44 @@ const USAGE: &str = "usage:
       start the nodes of a ROS 2 YAML launch file, one process each (or all in one with --composed);
       a node that dies stops the others and the launcher exits 1";
 
+/// The usage of one command (`xsurf bag info --help`: that block; `xsurf bag --help`: every
+/// `bag` block), or the whole usage when `args` names no command.
+fn command_usage(args: &[String]) -> String {
+    let words: Vec<&str> = args.iter().map(String::as_str).take_while(|a| !a.starts_with('-')).collect();
+    let mut blocks: Vec<Vec<&str>> = Vec::new();
+    for line in USAGE.lines().skip(1) {
+        if line.starts_with("  xsurf ") {
+            blocks.push(vec![line]);
+        } else if let Some(b) = blocks.last_mut() {
+            b.push(line);
+        }
+    }
+    let head = |b: &Vec<&str>| {
+        b[0].trim_start().trim_start_matches("xsurf ").split_whitespace().map(str::to_string).collect::<Vec<_>>()
+    };
+    for n in (1..=words.len()).rev() {
+        let chosen: Vec<&Vec<&str>> = blocks
+            .iter()
+            .filter(|b| {
+                let h = head(b);
+                h.len() >= n && h[..n].iter().zip(&words[..n]).all(|(a, w)| a.split('|').any(|x| x == *w))
+            })
+            .collect();
+        if !chosen.is_empty() {
+            let body: Vec<String> = chosen.iter().map(|b| b.join("\n")).collect();
+            return format!("usage:\n{}\n\n(all commands: xsurf --help; version: xsurf --version)", body.join("\n"));
+        }
+    }
+    USAGE.to_string()
+}
+
+/// Writes to standard output without panicking when the reader has gone (`xsurf --help | head`).
+fn write_stdout(text: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    let _ = out.write_all(text.as_bytes()).and_then(|()| out.flush());
+}
+
 fn usage(msg: impl Into<String>) -> anyhow::Error {
     anyhow!(UsageError(msg.into()))
 }
@@ -417,7 +455,7 @@ fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
             let [dir] = &args[1..] else { return Err(usage("bag info needs one DIR")) };
             let bag = xsurf_formats::bag::Bag::open(Path::new(dir))?;
             bag.verify_storage()?;
-            print!("{}", bag.info());
+            write_stdout(&bag.info());
             Ok(())
         }
         Some(other) => Err(usage(format!("unknown bag command {other:?} (info, play, record)"))),
@@ -477,7 +515,7 @@ fn main() -> ExitCode {
     }
     // `xsurf CMD --help` (or -h) anywhere: the usage, exit 0.
     if args.iter().any(|a| a == "--help" || a == "-h") && args.first().map(String::as_str) != Some("compose") {
-        println!("{USAGE}");
+        write_stdout(&format!("{}\n", command_usage(&args)));
         return ExitCode::SUCCESS;
     }
     if args.first().map(String::as_str) == Some("compose") {
@@ -496,7 +534,7 @@ fn main() -> ExitCode {
         Some("param") => xsurf_nodes::param_client::run(&args[1..]),
         Some("calibrate") => xsurf_nodes::calibrate::run(&args[1..]),
         Some("-h" | "--help" | "help") => {
-            println!("{USAGE}");
+            write_stdout(&format!("{USAGE}\n"));
             Ok(())
         }
         Some(other) => Err(usage(format!("unknown command {other:?}"))),
@@ -507,7 +545,7 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("xsurf: error: {e:#}");
             if e.downcast_ref::<UsageError>().is_some() {
-                eprintln!("{USAGE}");
+                eprintln!("{}", command_usage(&args));
                 ExitCode::from(2)
             } else if e.downcast_ref::<Incomplete>().is_some() {
                 ExitCode::from(3)
