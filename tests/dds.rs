@@ -164,6 +164,10 @@ fn node_executables_refuse_bad_input_with_exit_2() {
     assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("node types: camera_driver"));
     let out = xsurf(&["--version"]);
     assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), format!("xsurf {}", env!("CARGO_PKG_VERSION")));
+    // A parameter the node does not have is named in a warning (before the bad value stops it).
+    let out = run(ed, &["--ros-args", "-p", "nope:=3", "-p", "min_strength:=banana"], &[]);
+    assert_clean_failure(&out, 2, "min_strength");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("parameter nope is not a parameter of edge_detector"));
     // Numbers are echoed as written, not at full binary length (1e308 was 309 digits).
     let pose = env!("CARGO_BIN_EXE_c_arm_pose");
     let out = run(pose, &["--ros-args", "-p", "speed:=1e308"], &[]);

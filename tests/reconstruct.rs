@@ -532,6 +532,30 @@ fn compressed_cameras_reconstruct_like_their_raw_twin() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// A params file entry for a node that names a parameter it does not have is warned about,
+/// naming both; wildcard (`/**`) entries for other nodes' parameters are not.
+#[test]
+fn unknown_parameter_names_are_warned_about() {
+    let dir = scratch("unknown-param");
+    let params = dir.join("p.yaml");
+    let base = std::fs::read_to_string(pyramid_bag().join("params.yaml")).unwrap();
+    std::fs::write(&params, format!("{base}\n/cam1/edge_detector:\n  ros__parameters:\n    min_strenght: 12.0\n"))
+        .unwrap();
+    let out = xsurf(&[
+        "reconstruct",
+        pyramid_bag().to_str().unwrap(),
+        "--params-file",
+        params.to_str().unwrap(),
+        "--out",
+        dir.join("o").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("/cam1/edge_detector: parameter min_strenght is not a parameter of edge_detector"), "{err}");
+    assert!(!err.contains("parameter laser_plane is not"), "wildcard entries address every node: {err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn both_transports_for_one_camera_must_be_chosen_between() {
     let dir = scratch("both-transports");

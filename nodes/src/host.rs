@@ -27,6 +27,11 @@ pub fn node_config(
         components::declarations(node).ok_or_else(|| format!("{fq}: node type {node} has no component yet"))?;
     decls.extend(dds::host_declarations());
     let overrides = ros.param_overrides(&fq).map_err(|e| e.to_string())?;
+    for n in ros.explicit_param_names(&fq).map_err(|e| e.to_string())? {
+        if !decls.iter().any(|d| d.name == n) {
+            log::warn!("{fq}: parameter {n} is not a parameter of {node} (`{node} --help` lists them); ignored");
+        }
+    }
     let params = Params::resolve(&decls, &overrides).map_err(|e| format!("{fq}: {e}"))?;
     QosTable::from_params(&params).map_err(|e| format!("{fq}: {e}"))?;
     let component = components::build(node, &params).map_err(|e| format!("{fq}: {e}"))?;

@@ -267,10 +267,15 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
      -> anyhow::Result<Box<dyn xsurf_runtime::component::Component>> {
         let fq = fq_name(ns, node);
         let mut overrides = ros.param_overrides(&fq)?;
+        let decls = components::declarations(node).unwrap_or_default();
+        for n in ros.explicit_param_names(&fq)? {
+            if !decls.iter().any(|d| d.name == n) && !n.starts_with("qos.") && n != "use_sim_time" {
+                log::warn!("{fq}: parameter {n} is not a parameter of {node} (`{node} --help` lists them); ignored");
+            }
+        }
         for (k, v) in extra {
             overrides.insert(k.to_string(), v.clone());
         }
-        let decls = components::declarations(node).unwrap_or_default();
         let params = Params::resolve(&decls, &overrides).with_context(|| format!("node {fq}"))?;
         components::build(node, &params).with_context(|| format!("node {fq}"))
     };

@@ -219,6 +219,30 @@ impl RosArgs {
     }
 }
 
+impl RosArgs {
+    /// The parameter names given for `fq_node` itself: by `-p`, and in params-file entries that
+    /// name the node (not wildcards, which address every node). A name among these that the
+    /// node does not declare is a mistake worth a warning.
+    pub fn explicit_param_names(&self, fq_node: &str) -> Result<Vec<String>, ArgsError> {
+        let mut out = Vec::new();
+        for src in &self.params {
+            match src {
+                ParamSource::Value(n, _) => out.push(n.clone()),
+                ParamSource::File(path) => {
+                    let text = std::fs::read_to_string(path)
+                        .map_err(|e| ArgsError::ParamsFile { path: path.clone(), reason: e.to_string() })?;
+                    let (_, exact) = params_from_yaml_split(&text, fq_node)
+                        .map_err(|reason| ArgsError::ParamsFile { path: path.clone(), reason })?;
+                    out.extend(exact.into_keys());
+                }
+            }
+        }
+        out.sort();
+        out.dedup();
+        Ok(out)
+    }
+}
+
 /// `/ns` with a leading slash and no trailing one (`/` for the root).
 pub fn normalize_ns(ns: &str) -> String {
     let t = ns.trim_matches('/');
@@ -285,6 +309,17 @@ fn flatten(prefix: &str, v: &serde_yaml::Value, out: &mut BTreeMap<String, Param
 
 /// The parameters a params file (text) gives the node `fq_node`.
 pub fn params_from_yaml(text: &str, fq_node: &str) -> Result<BTreeMap<String, ParamValue>, String> {
+    let (mut wildcard, exact) = params_from_yaml_split(text, fq_node)?;
+    wildcard.extend(exact);
+    Ok(wildcard)
+}
+
+/// A params file's values for `fq_node`, split into those of wildcard entries (`/**`) and those
+/// of entries that name the node itself.
+pub fn params_from_yaml_split(
+    text: &str,
+    fq_node: &str,
+) -> Result<(BTreeMap<String, ParamValue>, BTreeMap<String, ParamValue>), String> {
     let doc: serde_yaml::Value = serde_yaml::from_str(text).map_err(|e| format!("not YAML: {e}"))?;
     let top = doc.as_mapping().ok_or("top level must map node names to ros__parameters")?;
     let mut wildcard = BTreeMap::new();
@@ -294,8 +329,7 @@ pub fn params_from_yaml(text: &str, fq_node: &str) -> Result<BTreeMap<String, Pa
         // Namespaces may nest: `/ns: {node: {ros__parameters: ...}}`.
         collect(key, v, fq_node, &mut wildcard, &mut exact)?;
     }
-    wildcard.extend(exact);
-    Ok(wildcard)
+    Ok((wildcard, exact))
 }
 
 fn collect(
