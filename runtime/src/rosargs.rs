@@ -314,12 +314,12 @@ pub fn params_from_yaml(text: &str, fq_node: &str) -> Result<BTreeMap<String, Pa
     Ok(wildcard)
 }
 
+/// Parameter values by name.
+pub type ParamMap = BTreeMap<String, ParamValue>;
+
 /// A params file's values for `fq_node`, split into those of wildcard entries (`/**`) and those
 /// of entries that name the node itself.
-pub fn params_from_yaml_split(
-    text: &str,
-    fq_node: &str,
-) -> Result<(BTreeMap<String, ParamValue>, BTreeMap<String, ParamValue>), String> {
+pub fn params_from_yaml_split(text: &str, fq_node: &str) -> Result<(ParamMap, ParamMap), String> {
     let doc: serde_yaml::Value = serde_yaml::from_str(text).map_err(|e| format!("not YAML: {e}"))?;
     let top = doc.as_mapping().ok_or("top level must map node names to ros__parameters")?;
     let mut wildcard = BTreeMap::new();
