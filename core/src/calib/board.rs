@@ -798,19 +798,42 @@ fn refine(image: &Grey, q0: [f64; 2], half: usize) -> [f64; 2] {
     [q[0] + ox, q[1] + oy]
 }
 
+/// An image made ready for the lattice search: grey, smoothed, its levels and candidates.
+struct Prepared {
+    raw: Grey,
+    fine: Grey,
+    levels: Vec<Level>,
+    min_contrast: f32,
+    pts: Vec<[f64; 2]>,
+    /// 1st and 99th percentile grey levels.
+    lo: f64,
+    hi: f64,
+}
+
+impl Prepared {
+    fn new(view: &ImageView<'_>) -> Prepared {
+        let raw = Grey::from_view(view);
+        let (lo, hi) = (raw.percentile(0.01), raw.percentile(0.99));
+        let fine = raw.blurred(0.8);
+        let min_contrast = (0.15 * (hi - lo) as f32).max(6.0);
+        let levels: Vec<Level> = LEVEL_SIGMAS.iter().map(|&s| Level::new(&raw, s)).collect();
+        let max = levels[0].resp.iter().fold(0.0f32, |m, &v| m.max(v));
+        let pts = candidates(&levels[0].grey, &levels[0].resp, max, min_contrast);
+        Prepared { raw, fine, levels, min_contrast, pts, lo, hi }
+    }
+    fn search(&self) -> Search<'_> {
+        Search { fine: &self.fine, levels: &self.levels, min_contrast: self.min_contrast }
+    }
+}
+
 /// Finds the board in an image.
 pub fn detect(view: &ImageView<'_>, spec: &BoardSpec) -> Result<Corners, BoardError> {
     if view.width() < 16 || view.height() < 16 {
         return Err(BoardError::TooSmall { width: view.width(), height: view.height() });
     }
-    let raw = Grey::from_view(view);
-    let (lo, hi) = (raw.percentile(0.01), raw.percentile(0.99));
-    let fine = raw.blurred(0.8);
-    let min_contrast = (0.15 * (hi - lo) as f32).max(6.0);
-    let levels: Vec<Level> = LEVEL_SIGMAS.iter().map(|&s| Level::new(&raw, s)).collect();
-    let max = levels[0].resp.iter().fold(0.0f32, |m, &v| m.max(v));
-    let pts = candidates(&levels[0].grey, &levels[0].resp, max, min_contrast);
-    let search = Search { fine: &fine, levels: &levels, min_contrast };
+    let prep = Prepared::new(view);
+    let (raw, fine, pts, lo, hi) = (&prep.raw, &prep.fine, &prep.pts, prep.lo, prep.hi);
+    let search = prep.search();
 
     // Seeds: candidates nearest the centroid first; a seed already in a grown lattice would
     // grow the same one again.
@@ -829,7 +852,7 @@ pub fn detect(view: &ImageView<'_>, spec: &BoardSpec) -> Result<Corners, BoardEr
             break;
         }
         tried += 1;
-        let Some(mut lat) = search.grow(&pts, seed) else { continue };
+        let Some(mut lat) = search.grow(pts, seed) else { continue };
         for &k in lat.grid.values() {
             if let Some(s) = seen.get_mut(k) {
                 *s = true;
@@ -837,13 +860,13 @@ pub fn detect(view: &ImageView<'_>, spec: &BoardSpec) -> Result<Corners, BoardEr
         }
         lat.grid = unshear(std::mem::take(&mut lat.grid));
         if let Some(window) = board_window(&lat.grid, spec) {
-            return Ok(label(&window, &lat.pts, spec, &fine));
+            return Ok(label(&window, &lat.pts, spec, fine));
         }
         if lat.grid.len() > best.grid.len() {
             best = lat;
         }
     }
-    Err(explain(&raw, &best.grid, &best.pts, spec, lo, hi, pts.len()))
+    Err(explain(raw, &best.grid, &best.pts, spec, lo, hi, pts.len()))
 }
 
 /// Lattices grown (from different seeds) before the search gives up.
@@ -976,14 +999,9 @@ pub type DebugCorner = ((i32, i32), [f64; 2]);
 /// lattice grown (cell, position).
 #[doc(hidden)]
 pub fn lattice_debug(view: &ImageView<'_>, _spec: &BoardSpec) -> (Vec<[f64; 2]>, Vec<DebugCorner>) {
-    let raw = Grey::from_view(view);
-    let (lo, hi) = (raw.percentile(0.01), raw.percentile(0.99));
-    let fine = raw.blurred(0.8);
-    let min_contrast = (0.15 * (hi - lo) as f32).max(6.0);
-    let levels: Vec<Level> = LEVEL_SIGMAS.iter().map(|&s| Level::new(&raw, s)).collect();
-    let max = levels[0].resp.iter().fold(0.0f32, |m, &v| m.max(v));
-    let pts = candidates(&levels[0].grey, &levels[0].resp, max, min_contrast);
-    let search = Search { fine: &fine, levels: &levels, min_contrast };
+    let prep = Prepared::new(view);
+    let pts = &prep.pts;
+    let search = prep.search();
     let mut best: Vec<DebugCorner> = Vec::new();
     let only: Option<[f64; 2]> = std::env::var("XSURF_BOARD_SEED").ok().and_then(|s| {
         let (x, y) = s.split_once(',')?;
@@ -995,11 +1013,11 @@ pub fn lattice_debug(view: &ImageView<'_>, _spec: &BoardSpec) -> (Vec<[f64; 2]>,
                 continue;
             }
         }
-        if let Some(lat) = search.grow(&pts, seed) {
+        if let Some(lat) = search.grow(pts, seed) {
             if lat.grid.len() > best.len() {
                 best = lat.grid.iter().map(|(&c, &k)| (c, lat.pts[k])).collect();
             }
         }
     }
-    (pts, best)
+    (pts.clone(), best)
 }
