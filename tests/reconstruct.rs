@@ -28,7 +28,10 @@ fn rewrite(src: &Path, dst: &Path, types: &[(&str, &str)], mut f: impl FnMut(Raw
 }
 
 fn reconstruct(bag: &Path, out: &Path) -> std::process::Output {
-    let params = pyramid_bag().join("params.yaml");
+    reconstruct_with(bag, &pyramid_bag().join("params.yaml"), out)
+}
+
+fn reconstruct_with(bag: &Path, params: &Path, out: &Path) -> std::process::Output {
     xsurf(&[
         "reconstruct",
         bag.to_str().unwrap(),
@@ -370,15 +373,7 @@ fn a_miscalibrated_camera_is_refined_and_saved_to_the_rig_file() {
         format!("{base}\n/merger:\n  ros__parameters:\n    save_rig_file: /nonexistent/dir/rig.yaml\n"),
     )
     .unwrap();
-    let o = xsurf(&[
-        "reconstruct",
-        bag.to_str().unwrap(),
-        "--params-file",
-        params.to_str().unwrap(),
-        "--out",
-        dir.join("unsaved").to_str().unwrap(),
-        "--quiet",
-    ]);
+    let o = reconstruct_with(&bag, &params, &dir.join("unsaved"));
     assert_clean_failure(&o, 3, "/merger: 1 file(s) could not be written");
     assert!(dir.join("unsaved/merged.ply").is_file());
     std::fs::remove_dir_all(&dir).unwrap();
@@ -571,15 +566,7 @@ fn both_transports_for_one_camera_must_be_chosen_between() {
         format!("{base}\n/cam1/edge_detector:\n  ros__parameters:\n    image_transport: compressed\n"),
     )
     .unwrap();
-    let out = xsurf(&[
-        "reconstruct",
-        b.to_str().unwrap(),
-        "--params-file",
-        params.to_str().unwrap(),
-        "--out",
-        dir.join("o").to_str().unwrap(),
-        "--quiet",
-    ]);
+    let out = reconstruct_with(&b, &params, &dir.join("o"));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("o/report.json")).unwrap()).unwrap();
     assert_eq!(report["frames_read"]["cam1"], report["frames_read"]["cam2"], "{report}");
