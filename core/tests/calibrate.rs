@@ -305,7 +305,7 @@ fn a_wide_lens_calibrates_with_the_rational_polynomial_model() {
 }
 
 /// The board turned a quarter, half and three quarters, in the hard look (clutter with a
-/// second checkerboard behind it, uneven light): found, and named in board order (corner `k`
+/// second checkerboard behind it, uneven light), and with no border at all: found, and named in board order (corner `k`
 /// where the board's point `k` projects), rows and columns by the board's size, not the image's
 /// axes.
 #[test]
@@ -314,10 +314,23 @@ fn a_turned_board_in_clutter_is_found_in_board_order() {
     let rays = RayTable::new(&model);
     let spec = spec();
     let centre = Vec3::new(4.0 * spec.square_m, 2.5 * spec.square_m, 0.0);
-    for (k, deg) in [0.0f64, 90.0, 180.0, 270.0, 33.0].into_iter().enumerate() {
+    // The last two: no white border at all, against the clutter.
+    let borderless = BoardLook { margin_squares: 0.0, ..BoardLook::hard() };
+    for (k, (deg, look)) in [
+        (0.0f64, BoardLook::hard()),
+        (90.0, BoardLook::hard()),
+        (180.0, BoardLook::hard()),
+        (270.0, BoardLook::hard()),
+        (33.0, BoardLook::hard()),
+        (0.0, borderless.clone()),
+        (-20.0, borderless),
+    ]
+    .into_iter()
+    .enumerate()
+    {
         let rotation = xsurf_core::geom::Mat3::rot_x(0.35).mul_mat(&xsurf_core::geom::Mat3::rot_z(deg.to_radians()));
         let pose = Iso3 { rotation, translation: Vec3::new(-0.02, 0.0, 0.55) - rotation.mul_vec(centre) };
-        let img = render_board(&rays, &pose, &spec, &BoardLook::hard(), &Exposure::hard(), 40 + k as u64);
+        let img = render_board(&rays, &pose, &spec, &look, &Exposure::hard(), 40 + k as u64);
         let c = detect(&img.view().unwrap(), &spec).unwrap_or_else(|e| panic!("{deg} degrees: {e}"));
         let worst = c
             .points
