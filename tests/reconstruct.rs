@@ -548,6 +548,14 @@ fn unknown_parameter_names_are_warned_about() {
     assert!(out.status.success(), "{err}");
     assert!(err.contains("/cam1/edge_detector: parameter min_strenght is not a parameter of edge_detector"), "{err}");
     assert!(!err.contains("parameter laser_plane is not"), "wildcard entries address every node: {err}");
+    // The merger's cameras must be in the bag.
+    std::fs::write(&params, format!("{base}\n/merger:\n  ros__parameters:\n    cameras: [cam1, cam9]\n")).unwrap();
+    let out = reconstruct_with(pyramid_bag(), &params, &dir.join("o2"));
+    assert_clean_failure(
+        &out,
+        1,
+        "parameter /merger cameras names \"cam9\", which the bag does not hold (its cameras: cam1, cam2)",
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -316,7 +316,22 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             );
         }
     }
-    let cams_param = ParamValue::StringArray(cameras.clone());
+    // The merger's cameras: the bag's, or the ones its `cameras` parameter names (first = the
+    // reference), each of which the bag must hold.
+    let merged_cameras = match ros.param_overrides(&fq_name("/", "merger"))?.get("cameras") {
+        None => cameras.clone(),
+        Some(ParamValue::StringArray(list)) => {
+            if let Some(missing) = list.iter().find(|c| !cameras.contains(c)) {
+                bail!(
+                    "parameter /merger cameras names {missing:?}, which the bag does not hold (its cameras: {})",
+                    cameras.join(", ")
+                );
+            }
+            list.clone()
+        }
+        Some(v) => bail!("parameter /merger cameras: {v:?} is not a list of camera names"),
+    };
+    let cams_param = ParamValue::StringArray(merged_cameras);
     router.add(
         build("merger", "/", &[("output_dir", ParamValue::String(out_dir.clone())), ("cameras", cams_param)])?,
         "merger",
