@@ -66,8 +66,12 @@ pub struct Report {
     pub frames_read: BTreeMap<String, u64>,
     /// Images in which a line was found, per camera.
     pub frames_with_line: BTreeMap<String, u64>,
-    /// Points per camera (all scans).
+    /// Points per camera triangulated from the lines (all scans).
     pub points: BTreeMap<String, u64>,
+    /// Points per camera in its surface, `<cam>.ply`'s vertices (all scans): fewer than
+    /// `points` by the samples the grid or the mesher set aside (a frame's duplicate row, a
+    /// point no triangle uses).
+    pub surface_points: BTreeMap<String, u64>,
     /// Triangles per camera (all scans).
     pub triangles: BTreeMap<String, u64>,
     /// Merged surface: points and triangles (all scans).
@@ -347,6 +351,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
         frames_with_line: BTreeMap::new(),
         points: BTreeMap::new(),
         triangles: BTreeMap::new(),
+        surface_points: BTreeMap::new(),
         merged_points: 0,
         merged_triangles: 0,
         scans: Vec::new(),
@@ -443,6 +448,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             }
             "mesher" => {
                 report.triangles.insert(cam.clone(), get("triangles"));
+                report.surface_points.insert(cam.clone(), get("mesh_points"));
                 report.dropped_frames.insert(cam.clone(), get("dropped_frames"));
             }
             "merger" => {

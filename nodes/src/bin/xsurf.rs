@@ -334,10 +334,11 @@ fn print_report(r: &offline::Report, out: &str) {
     );
     for c in &r.cameras {
         println!(
-            "  {c}: {} frames read, {} with a line, {} points, {} triangles, {} dropped",
+            "  {c}: {} frames read, {} with a line, {} points triangulated, {} in the surface ({} triangles), {} frames dropped",
             r.frames_read.get(c).unwrap_or(&0),
             r.frames_with_line.get(c).unwrap_or(&0),
             r.points.get(c).unwrap_or(&0),
+            r.surface_points.get(c).unwrap_or(&0),
             r.triangles.get(c).unwrap_or(&0),
             r.dropped_frames.get(c).unwrap_or(&0)
         );

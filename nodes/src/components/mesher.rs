@@ -179,6 +179,8 @@ pub struct MesherNode {
     frames: u64,
     dropped_frames: u64,
     triangles: u64,
+    /// Vertices of the meshes written (the points the surface uses).
+    mesh_points: u64,
     files_written: u64,
     outside_scan: u64,
 }
@@ -208,6 +210,7 @@ impl MesherNode {
             frames: 0,
             dropped_frames: 0,
             triangles: 0,
+            mesh_points: 0,
             files_written: 0,
             outside_scan: 0,
         })
@@ -260,6 +263,7 @@ impl MesherNode {
         }
         let mesh = mesh_grid(&grid, &self.cfg.mesh);
         self.triangles += mesh.triangles.len() as u64;
+        self.mesh_points += mesh.positions.len() as u64;
         let header = convert::header(stamp, &self.cfg.frame_id);
         out.publish(OUT_CLOUD, Msg::Cloud(Arc::new(convert::grid_cloud(&grid, header.clone()))));
         let marker = Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header, &self.camera, self.scan_id as i32, 1.0)));
@@ -281,12 +285,13 @@ impl MesherNode {
             }
         }
         log::info!(
-            "{}: scan {} {}: {} frames, {} points, {} triangles",
+            "{}: scan {} {}: {} frames, {} points in the grid, {} in the surface ({} triangles)",
             self.camera,
             self.scan_id,
             if aborted { "aborted" } else { "ended" },
             grid.frames(),
             grid.valid(),
+            mesh.positions.len(),
             mesh.triangles.len()
         );
     }
@@ -381,6 +386,7 @@ impl Component for MesherNode {
             ("frames", self.frames),
             ("dropped_frames", self.dropped_frames),
             ("triangles", self.triangles),
+            ("mesh_points", self.mesh_points),
             ("files_written", self.files_written),
             ("frames_outside_scans", self.outside_scan),
         ]
