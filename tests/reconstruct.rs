@@ -686,3 +686,24 @@ fn play_past_the_end_is_refused() {
         .unwrap();
     assert_clean_failure(&o, 1, "--start-offset 1000 s is past the end");
 }
+
+/// A scan too large for the memory it may use is refused with the figures before any work
+/// (it used to abort in an allocation, exit 134, a partial MCAP behind).
+#[test]
+fn a_scan_too_large_for_memory_is_refused_up_front() {
+    let dir = scratch("too-big");
+    let bag = dir.join("b");
+    let out = std::process::Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v 4000000; exec {} synth pyramid -o {} --size 8192x8192",
+            env!("CARGO_BIN_EXE_xsurf"),
+            bag.display()
+        ))
+        .output()
+        .unwrap();
+    assert_clean_failure(&out, 1, "needs about 14.1 GiB of memory");
+    assert_clean_failure(&out, 1, "the address-space limit");
+    assert!(!bag.exists() && !dir.join(".b.partial").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

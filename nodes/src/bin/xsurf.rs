@@ -193,6 +193,8 @@ fn scanner(a: &Args, scene: &str) -> anyhow::Result<Scanner> {
             rig
         }
     };
+    // Before the scanner sets up (which at 8192x8192 alone takes seconds and gigabytes).
+    synth::check_memory(&rig)?;
     Ok(Scanner::new(scene, rig, preset.laser(), settings)?)
 }
 
