@@ -140,6 +140,19 @@ fn image_transport(
     }
 }
 
+/// Where the offline reader tells the xray_aligner (alone) the implicit scan of a bag without
+/// `/scan/events`.
+const IMPLICIT_SCAN_TOPIC: &str = "/xsurf/implicit_scan_events";
+
+/// A START or END of scan 0 at `stamp_ns`.
+fn scan_event(stamp_ns: i64, event: u8) -> Msg {
+    Msg::ScanEvent(std::sync::Arc::new(xsurf_msgs::xsurf_msgs::ScanEvent {
+        header: crate::convert::header(stamp_ns, "table"),
+        scan_id: 0,
+        event,
+    }))
+}
+
 /// Files a reconstruction writes into its folder (besides `<cam>.ply`) and in `scan_<id>/`.
 const OUTPUT_FILES: &[&str] = &[
     "merged.ply",
@@ -300,6 +313,8 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             &ros.remaps,
         );
     }
+    let implicit_scan = !topic_type.contains_key("/scan/events");
+    let mut implicit_span: Option<(i64, i64)> = None;
     if let Some(x) = &opts.xray {
         if !x.is_file() {
             bail!("--xray {}: no such file", x.display());
@@ -312,11 +327,25 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
         } else {
             let file = ParamValue::String(x.to_string_lossy().into_owned());
             let dir = ParamValue::String(out_dir.clone());
+            // A bag without /scan/events is one scan (scan 0, as the mesher and merger take it):
+            // the radiograph's exposure is then the travel from its first frame to its last,
+            // given to the aligner alone as START and END on a topic of its own.
+            let mut remaps = ros.remaps.clone();
+            if implicit_scan {
+                remaps.insert(
+                    0,
+                    xsurf_runtime::rosargs::Remap {
+                        node: Some("xray_aligner".into()),
+                        from: "/scan/events".into(),
+                        to: IMPLICIT_SCAN_TOPIC.into(),
+                    },
+                );
+            }
             router.add(
                 build("xray_aligner", "/", &[("dicom_file", file), ("output_dir", dir)])?,
                 "xray_aligner",
                 "/",
-                &ros.remaps,
+                &remaps,
             );
         }
     }
@@ -406,6 +435,13 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
         read_s += t_dec.elapsed().as_secs_f64();
         if let Some(cam) = m.topic.strip_suffix("/image_raw").or_else(|| m.topic.strip_suffix("/image_raw/compressed"))
         {
+            if let (true, Some(stamp)) = (implicit_scan, msg.stamp_ns()) {
+                if implicit_span.is_none() {
+                    router.publish(IMPLICIT_SCAN_TOPIC, &scan_event(stamp, xsurf_msgs::xsurf_msgs::ScanEvent::START));
+                }
+                let (a, z) = implicit_span.unwrap_or((stamp, stamp));
+                implicit_span = Some((a.min(stamp), z.max(stamp)));
+            }
             images += 1;
             *report.frames_read.entry(cam.trim_start_matches('/').to_string()).or_default() += 1;
         }
@@ -426,6 +462,10 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
                 eprintln!("reconstruct: {images}/{total_images} frames, {fps:.0} frames/s");
             }
         }
+    }
+    if let (true, Some((_, last))) = (implicit_scan, implicit_span) {
+        router.publish(IMPLICIT_SCAN_TOPIC, &scan_event(last, xsurf_msgs::xsurf_msgs::ScanEvent::END));
+        router.tick(last);
     }
     router.finish();
     if tty {
@@ -456,7 +496,9 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
                 report.merged_triangles = get("triangles");
             }
             "xray_aligner" => {
-                report.xray = Some(if get("placed") > 0 {
+                report.xray = Some(if get("placed") > 0 && implicit_scan {
+                    "placed (exposure: the bag's first to last frame, as it has no /scan/events)".to_string()
+                } else if get("placed") > 0 {
                     "placed".to_string()
                 } else {
                     format!("not placed: {}", n.last_error.clone().unwrap_or_else(|| "see the log".into()))
