@@ -228,15 +228,18 @@ fn is_x_junction(g: &Grey, x: f64, y: f64, radius: f64, min_contrast: f32, predi
     hi - lo >= 0.5 * min_contrast && four_sectors(&sym, 0.5 * (lo + hi))
 }
 
-/// The threshold that splits the values into the two groups of largest between-class variance.
-fn otsu_split(s: &[f32; RING_SAMPLES]) -> f32 {
-    let mut sorted = *s;
+/// The threshold that splits the values into the two groups of largest between-class variance
+/// (Otsu's), half-way between the two values it falls between.
+fn otsu_split(values: &[f32]) -> f32 {
+    let mut sorted = values.to_vec();
     sorted.sort_by(f32::total_cmp);
+    let n = sorted.len();
+    let Some((&first, &last)) = sorted.first().zip(sorted.last()) else { return 0.0 };
     let total: f32 = sorted.iter().sum();
-    let (mut best, mut mid, mut below) = (f32::MIN, 0.5 * (sorted[0] + sorted[RING_SAMPLES - 1]), 0.0f32);
-    for k in 1..RING_SAMPLES {
+    let (mut best, mut mid, mut below) = (f32::MIN, 0.5 * (first + last), 0.0f32);
+    for k in 1..n {
         below += sorted[k - 1];
-        let (n0, n1) = (k as f32, (RING_SAMPLES - k) as f32);
+        let (n0, n1) = (k as f32, (n - k) as f32);
         let (m0, m1) = (below / n0, (total - below) / n1);
         let between = n0 * n1 * (m1 - m0) * (m1 - m0);
         if between > best {
@@ -690,27 +693,7 @@ fn flattened(g: &Grey, q0: [f64; 2], r: usize) -> (Grey, usize, usize) {
         data.extend_from_slice(&g.data[y * g.w + x0..=y * g.w + x1]);
     }
     let patch = Grey { w, h, data };
-    // Otsu's split over the patch (256 bins).
-    let mut hist = [0u32; 256];
-    for &v in &patch.data {
-        hist[v.clamp(0.0, 255.0) as usize] += 1;
-    }
-    let n = patch.data.len() as f64;
-    let total: f64 = hist.iter().enumerate().map(|(i, &c)| i as f64 * f64::from(c)).sum();
-    let (mut below_n, mut below_sum, mut best, mut split) = (0.0, 0.0, -1.0, 128.0);
-    for (i, &c) in hist.iter().enumerate().take(255) {
-        below_n += f64::from(c);
-        below_sum += i as f64 * f64::from(c);
-        if below_n == 0.0 || below_n == n {
-            continue;
-        }
-        let (m0, m1) = (below_sum / below_n, (total - below_sum) / (n - below_n));
-        let between = below_n * (n - below_n) * (m1 - m0).powi(2);
-        if between > best {
-            best = between;
-            split = i as f64 + 0.5;
-        }
-    }
+    let split = f64::from(otsu_split(&patch.data));
     // Least-squares plane a + b x + c y over the bright pixels.
     let (mut m, mut v) = ([0.0f64; 9], [0.0f64; 3]);
     let mut bright = 0usize;
@@ -730,10 +713,10 @@ fn flattened(g: &Grey, q0: [f64; 2], r: usize) -> (Grey, usize, usize) {
             }
         }
     }
-    let Some(l) = crate::calib::linalg::cholesky(&m, 3) else { return (patch, x0, y0) };
     if bright < 12 {
         return (patch, x0, y0);
     }
+    let Some(l) = crate::calib::linalg::cholesky(&m, 3) else { return (patch, x0, y0) };
     let [a, bx, by] = <[f64; 3]>::try_from(crate::calib::linalg::cholesky_solve(&l, 3, &v)).unwrap_or([0.0; 3]);
     let light = |x: usize, y: usize| a + bx * (x as f64 - w as f64 / 2.0) + by * (y as f64 - h as f64 / 2.0);
     let corners = [light(0, 0), light(w - 1, 0), light(0, h - 1), light(w - 1, h - 1)];
