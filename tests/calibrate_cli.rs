@@ -24,9 +24,17 @@ fn a_synthetic_set_calibrates_to_the_truth_through_the_cli() {
     let dir = scratch("calibrate");
     let out = xsurf(&["calibrate", "synth", dir.to_str().unwrap(), "--seed", "5"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    // The technician's commands, as the set lists them, with our binary on PATH.
-    let bin = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
-    let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap_or_default());
+    // The technician's commands, as the set lists them, after a plain build: xsurf is not on
+    // PATH, the script calls the binary that wrote it.
+    let script = std::fs::read_to_string(dir.join("calibrate.sh")).unwrap();
+    assert!(script.contains(env!("CARGO_BIN_EXE_xsurf")), "{script}");
+    let path: Vec<String> = std::env::var("PATH")
+        .unwrap_or_default()
+        .split(':')
+        .filter(|d| !std::path::Path::new(d).join("xsurf").exists())
+        .map(str::to_owned)
+        .collect();
+    let path = path.join(":");
     let run = Command::new("bash").arg(dir.join("calibrate.sh")).env("PATH", &path).output().unwrap();
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(run.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&run.stderr));

@@ -76,6 +76,8 @@ fn graph(mode: &str, cam1_log: &str, exits: &str) {
     assert_eq!(p["get"]["out"], "double value is: 30.0", "{p}");
     assert_ne!(p["set_bad_method"]["code"], 0);
     assert!(p["set_bad_method"]["out"].as_str().unwrap().contains("unknown method \"bogus\""), "{p}");
+    // The reason once: on stdout as `ros2 param set` prints it, not again in the error line.
+    assert!(!p["set_bad_method"]["err"].as_str().unwrap().contains("unknown method"), "{p}");
     assert_ne!(p["set_bad_type"]["code"], 0);
     assert!(
         p["set_bad_type"]["out"]
@@ -94,6 +96,16 @@ fn graph(mode: &str, cam1_log: &str, exits: &str) {
     assert_eq!(s["player_exit"], 0);
     assert_eq!(s["node_exits"].to_string().replace(',', ", "), exits, "nodes leave cleanly on SIGTERM");
     assert!(s["cam1_lines"].as_u64().unwrap() >= 70, "/cam1/laser_line is visible on DDS: {s}");
+    // Clean shutdowns log no error, and no warning about ROS_DISTRO (there is no ROS install).
+    for e in std::fs::read_dir(out.join("run")).unwrap() {
+        let path = e.unwrap().path();
+        if path.extension().is_some_and(|x| x == "log") {
+            let log = std::fs::read_to_string(&path).unwrap();
+            for bad in ["Cannot notify spin task", "ROS_DISTRO is not set"] {
+                assert!(!log.contains(bad), "{}: {bad}\n{log}", path.display());
+            }
+        }
+    }
     // The params file reached the right node only.
     let log1 = std::fs::read_to_string(out.join("run").join(cam1_log)).unwrap();
     assert!(log1.contains("/cam1/edge_detector: parameter method = gaussian"), "{log1}");
@@ -152,7 +164,11 @@ fn node_executables_refuse_bad_input_with_exit_2() {
         assert!(out.status.success(), "{node} --help");
         let text = String::from_utf8_lossy(&out.stdout);
         for d in xsurf_nodes::components::declarations(node).unwrap() {
-            assert!(text.contains(&format!("  {} (", d.name)), "{node} --help lacks {}:\n{text}", d.name);
+            let line = text.lines().find(|l| l.starts_with(&format!("  {} (", d.name)));
+            let line = line.unwrap_or_else(|| panic!("{node} --help lacks {}:\n{text}", d.name));
+            // Type, default and unit, as `ros2 param describe` gives them.
+            assert!(line.contains(d.default.type_name()) && line.contains(&format!("default {}", d.default)), "{line}");
+            assert!(d.unit.is_empty() || line.contains(&format!(" {}):", d.unit)), "{node}: no unit in {line}");
         }
         assert!(text.contains("publishes:") && text.contains("services:"), "{text}");
         let v = run(bin.to_str().unwrap(), &["--version"], &[]);
@@ -182,6 +198,19 @@ fn node_executables_refuse_bad_input_with_exit_2() {
     assert_clean_failure(&run(tr, &["--ros-args", "-p", "laser_plane:=[0, 0, 0, 1]"], &[]), 2, "laser_plane");
     assert_clean_failure(&run(tr, &[], &[("ROS_DOMAIN_ID", "999")]), 2, "ROS_DOMAIN_ID=\"999\"");
     assert_clean_failure(&xsurf(&["compose", "/cam1/teapot"]), 2, "unknown node type \"teapot\"");
+    // A node that is not there: said within two seconds, given up after the timeout.
+    let netns = root().join("../shared/tools/netns-run");
+    let t0 = std::time::Instant::now();
+    let out = Command::new(&netns)
+        .arg(env!("CARGO_BIN_EXE_xsurf"))
+        .args(["param", "list", "/nosuch", "--timeout", "3"])
+        .env("ROS_LOCALHOST_ONLY", "1")
+        .output()
+        .unwrap();
+    assert_clean_failure(&out, 1, "no answer from the parameter services of /nosuch within 3 s");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("waiting for the parameter services of /nosuch (ROS_DOMAIN_ID"), "{err}");
+    assert!(t0.elapsed().as_secs_f64() < 10.0, "{:?}", t0.elapsed());
 }
 
 /// `xsurf bag record` while `xsurf bag play` publishes a synthetic scan: every message of every

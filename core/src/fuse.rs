@@ -19,16 +19,23 @@ pub struct FuseConfig {
     /// Average the dropped sample into the kept one (weighted by quality) instead of only
     /// dropping it.
     pub average: bool,
-    /// Half size of the grid window whose mean strength is a sample's quality, samples.
+    /// Half size of the grid window whose mean strength is a sample's quality, samples. 15 (a
+    /// 31 x 31 window, about 70 mm at 2.3 mm spacing) by default: where two cameras see a region
+    /// about equally (a flat table), the line's strength ripples from sample to sample, and a
+    /// narrower window lets ownership flip with it, leaving islands and seams full of holes (the
+    /// demo's merged surface: 371 interior boundary edges at radius 3, 10 at 8, 3 at 15).
     pub quality_radius: usize,
     /// The mesher's limits: a sample that fusing leaves in no triangle is given back (see
     /// [`one_surface`]).
     pub mesh: MeshConfig,
+    /// A region that a camera keeps inside another camera's region, of fewer samples than
+    /// this, is given back to the other camera (see [`one_surface`]).
+    pub min_region: usize,
 }
 
 impl Default for FuseConfig {
     fn default() -> Self {
-        Self { min_distance_m: 0.002, average: true, quality_radius: 3, mesh: MeshConfig::default() }
+        Self { min_distance_m: 0.002, average: true, quality_radius: 15, mesh: MeshConfig::default(), min_region: 50 }
     }
 }
 
@@ -43,6 +50,8 @@ pub struct FuseReport {
     pub pairs: usize,
     /// Kept samples that fusing left in no triangle, given back to the other cameras.
     pub orphans: usize,
+    /// Small kept regions inside another camera's region, given back to it.
+    pub islands: usize,
 }
 
 /// Mean strength over a `(2r+1)^2` window of valid samples (a summed-area table).
@@ -107,11 +116,24 @@ fn give_back_orphans(
             }
         }
     }
-    if orphans.is_empty() {
-        return 0;
+    give_back(grids, originals, cfg, dropped, &orphans);
+    orphans.len()
+}
+
+/// Drops the samples `(grid, index)` and restores the other grids' samples that fusing dropped
+/// within the distance of them.
+fn give_back(
+    grids: &mut [Grid],
+    originals: &[Vec<[f32; 3]>],
+    cfg: &FuseConfig,
+    dropped: &mut [usize],
+    samples: &[(usize, usize)],
+) {
+    if samples.is_empty() {
+        return;
     }
     let cells: Vec<Cells> = originals.iter().map(|o| Cells::new(o, cfg.min_distance_m)).collect();
-    for &(k, i) in &orphans {
+    for &(k, i) in samples {
         grids[k].points_mut()[i] = [f32::NAN; 3];
         dropped[k] += 1;
         let q = originals[k][i];
@@ -126,7 +148,81 @@ fn give_back_orphans(
             });
         }
     }
-    orphans.len()
+}
+
+/// Where the better camera changes from place to place over a region both see about equally
+/// (a flat table between two cameras), fusing leaves small islands of one camera's samples
+/// inside the other's region, each with a seam all round it. A connected region (4-neighbours
+/// in the grid) of kept samples smaller than `min_region` whose neighbours outside it are
+/// mostly samples the fuse dropped (so the other cameras cover what surrounds it) is given
+/// back: dropped, and the other grids' samples dropped near it restored. Returns the islands.
+fn give_back_islands(
+    grids: &mut [Grid],
+    originals: &[Vec<[f32; 3]>],
+    cfg: &FuseConfig,
+    dropped: &mut [usize],
+) -> usize {
+    let mut islands = 0;
+    // Grid by grid, each on the state the previous ones left.
+    for k in 0..grids.len() {
+        let mut give: Vec<(usize, usize)> = Vec::new();
+        let g = &grids[k];
+        let (pts, orig, ns) = (g.points(), &originals[k], g.samples().max(1));
+        let n = pts.len();
+        let kept = |i: usize| pts[i][0].is_finite();
+        let neighbours = |i: usize| {
+            let s = i % ns;
+            [(s > 0).then(|| i - 1), (s + 1 < ns).then_some(i + 1), i.checked_sub(ns), Some(i + ns).filter(|&j| j < n)]
+                .into_iter()
+                .flatten()
+        };
+        let mut label = vec![u32::MAX; n];
+        let mut stack = Vec::new();
+        let mut region = Vec::new();
+        for seed in 0..n {
+            if !kept(seed) || label[seed] != u32::MAX {
+                continue;
+            }
+            label[seed] = seed as u32;
+            stack.push(seed);
+            region.clear();
+            let (mut fused_away, mut unseen) = (0usize, 0usize);
+            while let Some(i) = stack.pop() {
+                region.push(i);
+                for j in neighbours(i) {
+                    if kept(j) {
+                        if label[j] == u32::MAX {
+                            label[j] = seed as u32;
+                            stack.push(j);
+                        }
+                    } else if orig[j][0].is_finite() {
+                        fused_away += 1;
+                    } else {
+                        unseen += 1;
+                    }
+                }
+                if region.len() >= cfg.min_region {
+                    break;
+                }
+            }
+            if region.len() < cfg.min_region && fused_away > unseen {
+                islands += 1;
+                give.extend(region.iter().map(|&i| (k, i)));
+            } else {
+                // Too large: label the rest of it so that it is not walked again.
+                while let Some(i) = stack.pop() {
+                    for j in neighbours(i) {
+                        if kept(j) && label[j] == u32::MAX {
+                            label[j] = seed as u32;
+                            stack.push(j);
+                        }
+                    }
+                }
+            }
+        }
+        give_back(grids, originals, cfg, dropped, &give);
+    }
+    islands
 }
 
 /// Fuses the grids (all in `table`) in place: dropped samples become NaN. Orphans (kept samples
@@ -195,6 +291,7 @@ pub fn one_surface(grids: &mut [Grid], cfg: &FuseConfig) -> FuseReport {
             }
         }
     }
+    report.islands = give_back_islands(grids, &originals, cfg, &mut report.dropped);
     report.orphans = give_back_orphans(grids, &originals, cfg, &mut report.dropped);
     // Averaging moved kept samples a little: drop the rare pair that came closer than the bound.
     for j in 1..grids.len() {

@@ -37,6 +37,7 @@ pub mod edge;
 pub mod eval;
 pub mod fuse;
 pub mod geom;
+pub mod holes;
 pub mod image;
 pub mod limits;
 pub mod mesh;

@@ -67,8 +67,34 @@ fn name_of(tag: Tag) -> String {
 /// Reads the radiograph in `path`.
 pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
     let err = |what: String| DicomError { file: path.to_path_buf(), what };
-    if let Err(e) = std::fs::metadata(path) {
-        return Err(err(e.to_string()));
+    if let Some(why) = crate::file_problem(path) {
+        return Err(err(why));
+    }
+    // A DICOM file (PS3.10) is a 128-byte preamble and "DICM" before its meta group.
+    let mut head = [0u8; 132];
+    let n = std::fs::File::open(path)
+        .and_then(|mut f| {
+            let mut n = 0;
+            while n < head.len() {
+                match std::io::Read::read(&mut f, &mut head[n..])? {
+                    0 => break,
+                    k => n += k,
+                }
+            }
+            Ok(n)
+        })
+        .map_err(|e| err(e.to_string()))?;
+    if n < 132 || &head[128..132] != b"DICM" {
+        let kind = match &head[..n.min(8)] {
+            [0x89, b'P', b'N', b'G', ..] => " (it is a PNG image)",
+            [0xFF, 0xD8, 0xFF, ..] => " (it is a JPEG image)",
+            [b'I', b'I', 42, 0, ..] | [b'M', b'M', 0, 42, ..] => " (it is a TIFF image)",
+            _ => "",
+        };
+        let found = if n < 132 { format!("the file ends at byte {n}") } else { "not there".into() };
+        return Err(err(format!(
+            "not a DICOM file{kind}: the \"DICM\" prefix at byte offset 128 (PS3.10 7.1) is {found}"
+        )));
     }
     let obj = OpenFileOptions::new().open_file(path).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;
     let ts_uid = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']).to_string();
@@ -353,7 +379,7 @@ pub fn write_file(path: &Path, image: &Radiograph, info: &XrayInfo, key: &str) -
         .map_err(|e| err(format!("file meta: {e}")))?;
     let mut bytes = Vec::new();
     file.write_all(&mut bytes).map_err(|e| err(format!("encoding: {e}")))?;
-    crate::write_bytes_atomic(path, &bytes).map_err(|e| err(e.source.to_string()))
+    crate::write_bytes_atomic(path, &bytes).map_err(|e| err(e.cause.to_string()))
 }
 
 /// A decimal string of at most 16 characters (the DS limit).
@@ -425,9 +451,22 @@ mod tests {
         let n = d.join("not.dcm");
         std::fs::write(&n, b"hello").unwrap();
         let e = read_file(&n).unwrap_err().to_string();
+        assert!(e.contains("not.dcm") && e.contains("not a DICOM file") && e.contains("ends at byte 5"), "{e}");
+        // A PNG given for a radiograph: named as one, with the offset of the missing prefix.
+        let png = d.join("x.png");
+        std::fs::write(&png, [&[0x89u8, b'P', b'N', b'G', 13, 10, 26, 10][..], &[0u8; 200]].concat()).unwrap();
+        let e = read_file(&png).unwrap_err().to_string();
+        assert!(e.contains("x.png") && e.contains("PNG image") && e.contains("byte offset 128"), "{e}");
+        // The prefix is there but the meta group is not: the reader's own message, named.
+        let mut fake = vec![0u8; 128];
+        fake.extend_from_slice(b"DICMgarbage");
+        std::fs::write(&n, &fake).unwrap();
+        let e = read_file(&n).unwrap_err().to_string();
         assert!(e.contains("not.dcm") && e.contains("not a readable DICOM file"), "{e}");
-        // Missing file.
-        assert!(read_file(&d.join("missing.dcm")).unwrap_err().to_string().contains("missing.dcm"));
+        // Missing file, and a folder.
+        let e = read_file(&d.join("missing.dcm")).unwrap_err().to_string();
+        assert!(e.contains("missing.dcm") && e.contains("does not exist"), "{e}");
+        assert!(read_file(&d).unwrap_err().to_string().contains("is a folder, not a file"));
         std::fs::remove_dir_all(&d).unwrap();
     }
 

@@ -24,21 +24,33 @@ pub mod vrml;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-/// An I/O error with the path it concerns.
+/// An I/O error with the path it concerns. The message carries the cause, so the cause is not
+/// also given as the error's source (a chain printed with `{:#}` would say it twice).
 #[derive(Debug, thiserror::Error)]
-#[error("{path}: {source}")]
+#[error("{path}: {cause}")]
 pub struct FileError {
     /// The file.
     pub path: PathBuf,
     /// The cause.
-    #[source]
-    pub source: std::io::Error,
+    pub cause: std::io::Error,
 }
 
 impl FileError {
     /// Wraps an I/O error with its path.
-    pub fn new(path: &Path, source: std::io::Error) -> Self {
-        Self { path: path.to_path_buf(), source }
+    pub fn new(path: &Path, cause: std::io::Error) -> Self {
+        Self { path: path.to_path_buf(), cause }
+    }
+}
+
+/// Why `path` cannot be read as a file ("does not exist", "is a folder, not a file", or the
+/// system's reason), or `None` if it is a file.
+pub fn file_problem(path: &Path) -> Option<String> {
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => None,
+        Ok(m) if m.is_dir() => Some("is a folder, not a file".into()),
+        Ok(_) => Some("is not a regular file".into()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Some("does not exist".into()),
+        Err(e) => Some(e.to_string()),
     }
 }
 
@@ -74,6 +86,30 @@ pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A write under a file (not a folder) names the path and the cause once, also when the
+    /// error is printed with its chain of sources (it was "...: Not a directory (os error 20):
+    /// Not a directory (os error 20)").
+    #[test]
+    fn a_file_error_says_its_cause_once() {
+        let dir = std::env::temp_dir().join(format!("xsurf-fileerror-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("plain"), b"x").unwrap();
+        let e = write_bytes_atomic(&dir.join("plain/out.bin"), b"y").unwrap_err();
+        let mut text = e.to_string();
+        let mut src = std::error::Error::source(&e);
+        while let Some(s) = src {
+            text.push_str(&format!(": {s}"));
+            src = s.source();
+        }
+        assert!(text.contains("plain/out.bin"), "{text}");
+        let cause = e.cause.to_string();
+        assert_eq!(text.matches(cause.as_str()).count(), 1, "{text}");
+        assert_eq!(file_problem(&dir.join("plain")), None);
+        assert_eq!(file_problem(&dir).as_deref(), Some("is a folder, not a file"));
+        assert_eq!(file_problem(&dir.join("none")).as_deref(), Some("does not exist"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn failed_write_leaves_no_file() {

@@ -111,6 +111,12 @@ impl Opts {
             },
         }
     }
+    fn whole(&self, name: &str, default: u64) -> anyhow::Result<u64> {
+        match self.get(name) {
+            None => Ok(default),
+            Some(v) => v.parse::<u64>().map_err(|_| usage(format!("{name}: {v:?} is not a whole number, 0 or more"))),
+        }
+    }
     fn board(&self) -> anyhow::Result<BoardSpec> {
         let square = self.need("--square")?;
         let square: f64 = square
@@ -185,7 +191,11 @@ fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
 }
 
 fn find_board(path: &Path, spec: &BoardSpec) -> Result<(Corners, (u32, u32)), String> {
-    let img = xsurf_formats::frames::read_frame(path).map_err(|e| e.to_string())?;
+    // The caller names the file: its reason alone (the reader's error names it too).
+    let img = xsurf_formats::frames::read_frame(path).map_err(|e| {
+        let e = e.to_string();
+        e.strip_prefix(&format!("{}: ", path.display())).map_or(e.clone(), str::to_owned)
+    })?;
     let view = img.view().map_err(|e| e.to_string())?;
     let c = detect(&view, spec).map_err(|e| e.to_string())?;
     Ok((c, (img.width, img.height)))
@@ -236,7 +246,15 @@ fn cmd_intrinsics(args: &[String]) -> anyhow::Result<()> {
         bail!("intrinsics: no image shows the {}x{} board{reasons}", spec.cols, spec.rows);
     };
     let cfg = IntrinsicsConfig { model, ..IntrinsicsConfig::default() };
-    let r = intrinsics::calibrate(&spec, &found, w, h, &cfg).map_err(|e| anyhow!("intrinsics: {e}{reasons}"))?;
+    let r = intrinsics::calibrate(&spec, &found, w, h, &cfg).map_err(|e| {
+        // The error may name what it calibrated already ("intrinsics: 2 usable, 3 needed").
+        let e = e.to_string();
+        if e.starts_with("intrinsics") {
+            anyhow!("{e}{reasons}")
+        } else {
+            anyhow!("intrinsics: {e}{reasons}")
+        }
+    })?;
     let m = &r.model;
     println!(
         "{name}: {w}x{h}, fx {:.2} fy {:.2} cx {:.2} cy {:.2} (1-sigma {:.2} {:.2} {:.2} {:.2} px), {} d {:?}",
@@ -454,7 +472,11 @@ fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
 type Pixels = (Vec<[f64; 2]>, (u32, u32));
 
 fn line_pixels(path: &Path) -> Result<Pixels, String> {
-    let img = xsurf_formats::frames::read_frame(path).map_err(|e| e.to_string())?;
+    // The caller names the file: its reason alone (the reader's error names it too).
+    let img = xsurf_formats::frames::read_frame(path).map_err(|e| {
+        let e = e.to_string();
+        e.strip_prefix(&format!("{}: ", path.display())).map_or(e.clone(), str::to_owned)
+    })?;
     let view = img.view().map_err(|e| e.to_string())?;
     let mut det = EdgeDetector::new(EdgeConfig::default()).map_err(|e| e.to_string())?;
     let mut line = LaserLine::default();
@@ -695,9 +717,13 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
     let board = o.get("--board").unwrap_or("9x6");
     let square = o.num("--square", 0.02765)?;
     let spec = BoardSpec::parse(board, square).map_err(|e| usage(format!("--board/--square: {e}")))?;
-    let count = o.num("--views", 20.0)? as usize;
+    let count = o.whole("--views", 20)?;
+    if !(3..=500).contains(&count) {
+        return Err(usage(format!("--views {count}: from 3 to 500 board views (intrinsics need 3 or more)")));
+    }
+    let count = count as usize;
     let noise = o.num("--noise", 2.0)?;
-    let seed = o.num("--seed", 1.0)? as u64;
+    let seed = o.whole("--seed", 1)?;
     let truth = Rig::study(w, h);
     let exposure = if hard { Exposure::hard() } else { Exposure { noise_sigma: noise, ..Exposure::default() } };
     let (look, table_look) = if hard {
@@ -732,13 +758,20 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
     // The placement board: centred under the C-arm at travel 0.
     let origin = Vec3::new(-(spec.cols as f64 - 1.0) * 0.5 * square, (spec.rows as f64 - 1.0) * 0.5 * square, 0.0);
     let board_pose = table_from_board(origin, 0.0);
+    // The script calls the binary that wrote it (xsurf need not be on PATH after a plain
+    // build); XSURF overrides it.
+    let exe = std::env::current_exe().ok().and_then(|p| p.to_str().map(str::to_owned)).map_or_else(
+        || "xsurf".to_string(),
+        // Escaped for its place inside double quotes in the script.
+        |p| p.chars().flat_map(|c| if "\"$`\\".contains(c) { vec!['\\', c] } else { vec![c] }).collect(),
+    );
     let mut script = format!(
-        "#!/usr/bin/env bash\n# Calibrates the rig from this set (written by `xsurf calibrate synth`); compare rig.yaml with truth_rig.yaml.\nset -euo pipefail\ncd \"$(dirname \"$0\")\"\nB=\"--board {}x{} --square {square}\"\n",
+        "#!/usr/bin/env bash\n# Calibrates the rig from this set (written by `xsurf calibrate synth`); compare rig.yaml with truth_rig.yaml.\n# XSURF=/path/to/xsurf runs another xsurf than the one that wrote it.\nset -euo pipefail\ncd \"$(dirname \"$0\")\"\nXSURF=\"${{XSURF:-{exe}}}\"\nB=\"--board {}x{} --square {square}\"\n",
         spec.cols, spec.rows
     );
     let mut placement_args =
-        format!("xsurf calibrate placement $B --board-origin {},{},0 -o rig.yaml", origin.x, origin.y);
-    let mut laser_args = String::from("xsurf calibrate laser --rig rig.yaml");
+        format!("\"$XSURF\" calibrate placement $B --board-origin {},{},0 -o rig.yaml", origin.x, origin.y);
+    let mut laser_args = String::from("\"$XSURF\" calibrate laser --rig rig.yaml");
     for (ci, cam) in truth.cameras.iter().enumerate() {
         let model = cam.model()?;
         let rays = RayTable::new(&model);
@@ -755,7 +788,7 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
             let img = render_board(&rays, pose, &spec, &look, &exposure, seed ^ ((ci * 100 + i) as u64));
             png(&dir.join(format!("intrinsics/{}_{i:02}.{ext}", cam.name)), &img)?;
         }
-        script.push_str(&format!("xsurf calibrate intrinsics $B -o {0}.yaml intrinsics/{0}_*.{ext}\n", cam.name));
+        script.push_str(&format!("\"$XSURF\" calibrate intrinsics $B -o {0}.yaml intrinsics/{0}_*.{ext}\n", cam.name));
         let mut names = Vec::new();
         for (i, &t) in SYNTH_TRAVELS.iter().enumerate() {
             let pose = table_from_carm(t, 0.0, 0.0).compose(&cam.carm_from_optical()).inverse().compose(&board_pose);

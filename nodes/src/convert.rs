@@ -85,22 +85,52 @@ pub fn line_msg(line: &CoreLine, header: Header) -> LaserLine {
 
 /// Why a `LaserLine` message cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error(
-    "LaserLine arrays disagree: u {u}, v {v}, strength {strength}, width {width}, rgb {rgb} (expected rgb 0 or 3 x u)"
-)]
-pub struct LineShapeError {
-    u: usize,
-    v: usize,
-    strength: usize,
-    width: usize,
-    rgb: usize,
+pub enum LineShapeError {
+    /// The per-sample arrays have different lengths.
+    #[error(
+        "LaserLine arrays disagree: u {u}, v {v}, strength {strength}, width {width}, rgb {rgb} (expected rgb 0 or 3 x u)"
+    )]
+    Arrays {
+        /// Length of `u`.
+        u: usize,
+        /// Length of `v`.
+        v: usize,
+        /// Length of `strength`.
+        strength: usize,
+        /// Length of `width`.
+        width: usize,
+        /// Length of `rgb`.
+        rgb: usize,
+    },
+    /// The orientation is neither vertical (0) nor horizontal (1).
+    #[error("LaserLine orientation {0} is neither 0 (vertical) nor 1 (horizontal)")]
+    Orientation(u8),
+    /// The image size is outside the limits every tool applies.
+    #[error("LaserLine image size {0}x{1} is outside {2} pixels a side")]
+    ImageSize(u32, u32, String),
+    /// The sample count is not one per row (vertical) or column (horizontal) of its image.
+    #[error("LaserLine has {samples} samples; a {orientation} line of a {width}x{height} image has {expected}")]
+    Samples {
+        /// Samples in the message.
+        samples: usize,
+        /// One per row or column.
+        expected: u32,
+        /// "vertical" or "horizontal".
+        orientation: &'static str,
+        /// Image width.
+        width: u32,
+        /// Image height.
+        height: u32,
+    },
 }
 
-/// The algorithm form of a line message, checking that its arrays agree.
+/// The algorithm form of a line message, checking that it describes a line of its image:
+/// arrays of one length, a known orientation, an image within the limits, and one sample per
+/// row (vertical) or column (horizontal).
 pub fn core_line(m: &LaserLine) -> Result<CoreLine, LineShapeError> {
     let n = m.u.len();
     if m.v.len() != n || m.strength.len() != n || m.width.len() != n || !(m.rgb.is_empty() || m.rgb.len() == 3 * n) {
-        return Err(LineShapeError {
+        return Err(LineShapeError::Arrays {
             u: n,
             v: m.v.len(),
             strength: m.strength.len(),
@@ -108,12 +138,25 @@ pub fn core_line(m: &LaserLine) -> Result<CoreLine, LineShapeError> {
             rgb: m.rgb.len(),
         });
     }
+    let (orientation, expected, name) = match m.orientation {
+        LaserLine::ORIENTATION_VERTICAL => (Orientation::Vertical, m.image_height, "vertical"),
+        LaserLine::ORIENTATION_HORIZONTAL => (Orientation::Horizontal, m.image_width, "horizontal"),
+        other => return Err(LineShapeError::Orientation(other)),
+    };
+    if !xsurf_core::limits::image_side_ok(m.image_width) || !xsurf_core::limits::image_side_ok(m.image_height) {
+        return Err(LineShapeError::ImageSize(m.image_width, m.image_height, xsurf_core::limits::image_side_text()));
+    }
+    if n != expected as usize {
+        return Err(LineShapeError::Samples {
+            samples: n,
+            expected,
+            orientation: name,
+            width: m.image_width,
+            height: m.image_height,
+        });
+    }
     Ok(CoreLine {
-        orientation: if m.orientation == LaserLine::ORIENTATION_HORIZONTAL {
-            Orientation::Horizontal
-        } else {
-            Orientation::Vertical
-        },
+        orientation,
         image_width: m.image_width,
         image_height: m.image_height,
         u: m.u.clone(),

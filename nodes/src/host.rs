@@ -67,6 +67,24 @@ fn parse(who: &str, args: &[String]) -> Result<RosArgs, ExitCode> {
     }
 }
 
+/// A usage error unless `name` and every part of the namespace `ns` are ROS name tokens.
+fn check_identity(name: &str, ns: &str) -> Result<(), String> {
+    // ROS 2's rule (rcl): letters, digits and underscores, not starting with a digit.
+    let rule = "letters, digits or _, not starting with a digit";
+    let ok = |t: &str| {
+        let mut c = t.chars();
+        c.next().is_some_and(|f| f.is_ascii_alphabetic() || f == '_')
+            && c.all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+    };
+    if !ok(name) {
+        return Err(format!("node name {name:?} is not a valid ROS name ({rule})"));
+    }
+    if let Some(bad) = ns.split('/').filter(|p| !p.is_empty()).find(|p| !ok(p)) {
+        return Err(format!("namespace {ns:?}: {bad:?} is not a valid ROS name ({rule})"));
+    }
+    Ok(())
+}
+
 fn host(who: &str, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> ExitCode {
     let env = match DdsEnv::from_env(|k| std::env::var(k).ok()) {
         Ok(e) => e,
@@ -138,6 +156,10 @@ pub fn main(node: &'static str) -> ExitCode {
         return ExitCode::from(2);
     }
     let (name, ns) = ros.node_identity(node, "/");
+    if let Err(e) = check_identity(&name, &ns) {
+        eprintln!("{node}: {e}");
+        return ExitCode::from(2);
+    }
     match node_config(node, &name, &ns, &ros) {
         Ok(n) => host(node, vec![n]),
         Err(e) => {
@@ -175,6 +197,10 @@ pub fn compose(args: &[String]) -> ExitCode {
             return ExitCode::from(2);
         };
         let ns = xsurf_runtime::rosargs::normalize_ns(ns);
+        if let Err(e) = check_identity(name, &ns) {
+            eprintln!("xsurf compose: {spec}: {e}");
+            return ExitCode::from(2);
+        }
         match node_config(node, name, &ns, &ros) {
             Ok(n) => nodes.push(n),
             Err(e) => {

@@ -244,8 +244,8 @@ fn node(body: &Value, scope: &Scope) -> anyhow::Result<NodeSpec> {
     for p in field(body, "param").and_then(Value::as_sequence).into_iter().flatten() {
         if let Some(f) = field(p, "from") {
             let f = PathBuf::from(text(f, "param from", scope)?);
-            if !f.is_file() {
-                bail!("node {}: params file {} does not exist", spec.fq_name(), f.display());
+            if let Some(why) = xsurf_formats::file_problem(&f) {
+                bail!("node {}: params file {} {why}", spec.fq_name(), f.display());
             }
             spec.param_files.push(f);
         } else {

@@ -266,8 +266,8 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     clear_outputs(&opts.out, &cameras)?;
     let mut args: Vec<String> = vec!["--ros-args".into()];
     if let Some(f) = &opts.params_file {
-        if !f.is_file() {
-            bail!("params file {} does not exist", f.display());
+        if let Some(why) = xsurf_formats::file_problem(f) {
+            bail!("--params-file {}: {why}", f.display());
         }
         args.extend(["--params-file".into(), f.to_string_lossy().into_owned()]);
     }
@@ -316,8 +316,8 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     let implicit_scan = !topic_type.contains_key("/scan/events");
     let mut implicit_span: Option<(i64, i64)> = None;
     if let Some(x) = &opts.xray {
-        if !x.is_file() {
-            bail!("--xray {}: no such file", x.display());
+        if let Some(why) = xsurf_formats::file_problem(x) {
+            bail!("--xray {}: {why}", x.display());
         }
         // Read once up front so a bad file is named before the work starts; the surface is
         // still reconstructed when it cannot be placed.

@@ -14,8 +14,15 @@ use std::time::Duration;
 use xsurf_runtime::dds::{from_ros, to_ros, DdsEnv};
 use xsurf_runtime::params::ParamValue;
 
-/// How long to wait for the node's services before giving up.
+fn usage(msg: impl Into<String>) -> anyhow::Error {
+    anyhow!(crate::UsageError(msg.into()))
+}
+
+/// How long to wait for the node's services before giving up, by default.
 const TIMEOUT: Duration = Duration::from_secs(15);
+
+/// How long to wait quietly before saying what is being waited for.
+const QUIET: Duration = Duration::from_secs(2);
 
 fn client<Req: Message + Clone + 'static, Resp: Message + 'static>(
     node: &mut Node,
@@ -46,14 +53,32 @@ fn call<Req: Message + 'static, Resp: Message + 'static>(
     })
 }
 
-/// Runs `param` with its arguments; prints the answer on stdout.
+/// Runs `param` with its arguments (`--timeout S` anywhere: how long to wait for the node);
+/// prints the answer on stdout.
 pub fn run(args: &[String]) -> anyhow::Result<()> {
-    let (verb, node_name, rest) = match args {
+    let mut args = args.to_vec();
+    let mut timeout = TIMEOUT;
+    if let Some(i) = args.iter().position(|a| a == "--timeout") {
+        let v = args.get(i + 1).ok_or_else(|| usage("--timeout needs a value (seconds)"))?;
+        let s: f64 = v
+            .parse()
+            .ok()
+            .filter(|s: &f64| s.is_finite() && *s > 0.0 && *s <= 3600.0)
+            .ok_or_else(|| usage(format!("--timeout: {v:?} is not a number of seconds in (0, 3600]")))?;
+        timeout = Duration::from_secs_f64(s);
+        args.drain(i..i + 2);
+    }
+    let (verb, node_name, rest) = match args.as_slice() {
         [v, n, rest @ ..] => (v.as_str(), n.as_str(), rest),
-        _ => bail!("usage: xsurf param list|get|set NODE [NAME [VALUE]]"),
+        _ => return Err(usage("param needs list, get or set and a NODE")),
     };
     if !node_name.starts_with('/') {
-        bail!("node {node_name:?}: give the fully qualified name, e.g. /cam1/edge_detector");
+        return Err(usage(format!("node {node_name:?}: give the fully qualified name, e.g. /cam1/edge_detector")));
+    }
+    match (verb, rest.len()) {
+        ("list", 0) | ("get", 1) | ("set", 2) => {}
+        ("list" | "get" | "set", _) => return Err(usage(format!("param {verb}: wrong number of arguments"))),
+        _ => return Err(usage(format!("param {verb:?}: expected list, get or set"))),
     }
     let env = DdsEnv::from_env(|k| std::env::var(k).ok())?;
     let ctx = env.context()?;
@@ -66,9 +91,21 @@ pub fn run(args: &[String]) -> anyhow::Result<()> {
     let spinner = node.spinner().map_err(|e| anyhow!("spinner: {e:?}"))?;
     std::thread::spawn(move || futures::executor::block_on(spinner.spin()));
     let target = node_name.to_string();
+    let (domain, scope) = (env.domain_id, if env.localhost_only { "localhost only" } else { "all interfaces" });
     std::thread::spawn(move || {
-        std::thread::sleep(TIMEOUT);
-        eprintln!("xsurf: error: no answer from the parameter services of {target} within {} s", TIMEOUT.as_secs());
+        std::thread::sleep(QUIET.min(timeout));
+        if timeout > QUIET {
+            eprintln!(
+                "xsurf: waiting for the parameter services of {target} (ROS_DOMAIN_ID {domain}, {scope}; up to {:.0} s more)",
+                (timeout - QUIET).as_secs_f64()
+            );
+            std::thread::sleep(timeout - QUIET);
+        }
+        eprintln!(
+            "xsurf: error: no answer from the parameter services of {target} within {:.0} s: is the node running, \
+             in ROS_DOMAIN_ID {domain}? (`--timeout S` waits longer)",
+            timeout.as_secs_f64()
+        );
         std::process::exit(1);
     });
     match (verb, rest) {
@@ -102,7 +139,7 @@ pub fn run(args: &[String]) -> anyhow::Result<()> {
             }
         }
         ("set", [name, value]) => {
-            let v = ParamValue::parse(value).map_err(|e| anyhow!("value {value:?}: {e}"))?;
+            let v = ParamValue::parse(value).map_err(|e| usage(format!("value {value:?}: {e}")))?;
             let c = client::<SetParametersRequest, SetParametersResponse>(
                 &mut node,
                 node_name,
@@ -113,14 +150,14 @@ pub fn run(args: &[String]) -> anyhow::Result<()> {
                 SetParametersRequest { parameter: vec![Parameter { name: name.clone(), value: to_ros(&v) }.into()] };
             let r = call(&node, &c, req)?;
             let res = r.results.into_iter().next().context("no result returned")?;
-            if res.successful {
-                println!("Set parameter successful");
-            } else {
+            if !res.successful {
+                // As `ros2 param set` prints it; the error line then does not repeat the reason.
                 println!("Setting parameter failed: {}", res.reason);
-                bail!("{node_name} refused {name} = {value}: {}", res.reason);
+                bail!("{node_name} refused {name} = {value} (the reason above)");
             }
+            println!("Set parameter successful");
         }
-        _ => bail!("usage: xsurf param list NODE | get NODE NAME | set NODE NAME VALUE"),
+        _ => return Err(usage("param list NODE | get NODE NAME | set NODE NAME VALUE")),
     }
     Ok(())
 }

@@ -140,17 +140,25 @@ impl Port {
     }
 }
 
-/// Messages a component publishes while handling one input: `(output index, message)`.
+/// Messages a component publishes while handling one input: `(output index, message)`; and
+/// earlier messages it refuses only now (a line kept until its pose arrived, say).
 #[derive(Debug, Default)]
 pub struct Outbox {
     /// Queued messages.
     pub items: Vec<(usize, Msg)>,
+    /// Earlier messages refused now: `(input index, why)`. The host counts and logs each under
+    /// its own input's topic, not the topic of the message being handled.
+    pub refused: Vec<(usize, NodeError)>,
 }
 
 impl Outbox {
     /// Publishes `msg` on output `port`.
     pub fn publish(&mut self, port: usize, msg: Msg) {
         self.items.push((port, msg));
+    }
+    /// Refuses an earlier message of input `input`, now.
+    pub fn refuse(&mut self, input: usize, e: NodeError) {
+        self.refused.push((input, e));
     }
 }
 

@@ -808,9 +808,8 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     }
     // Give reliable writers a moment to deliver the last output, then leave the graph.
     std::thread::sleep(Duration::from_millis(200));
-    for dn in &dds_nodes {
-        dn.node.stop_spinner();
-    }
+    // Dropping a node stops its spinner (ros2-client's Drop signals it; signalling it first
+    // by hand as well filled the one-slot channel, and the Drop then logged an error).
     drop(nodes);
     drop(dds_nodes);
     drop(ctx);

@@ -31,7 +31,9 @@ impl log::Log for Logger {
             .filter(|(name, _)| target.starts_with(name.as_str()))
             .max_by_key(|(name, _)| name.len())
             .map(|(_, l)| *l)
-            .unwrap_or(if target.starts_with("rustdds") {
+            .unwrap_or(if target.starts_with("rustdds") || target.starts_with("ros2_client::distributions") {
+                // RustDDS is verbose at warn; ros2-client warns at every start that ROS_DISTRO is
+                // not set, which it need not be here (no ROS install).
                 log::LevelFilter::Error
             } else if target.starts_with("ros2_client") {
                 self.level.min(log::LevelFilter::Warn)

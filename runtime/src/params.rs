@@ -25,6 +25,12 @@ pub enum ParamValue {
 }
 
 impl ParamValue {
+    /// A double from an `f32` default as it is written (`0.012`), not as its binary value
+    /// widens (`0.012000000104308128`), so docs and `param get` show what the code says.
+    pub fn from_f32(x: f32) -> ParamValue {
+        ParamValue::Double(x.to_string().parse().unwrap_or(f64::from(x)))
+    }
+
     /// The ROS 2 type name (`double`, `string[]`, ...).
     pub fn type_name(&self) -> &'static str {
         match self {

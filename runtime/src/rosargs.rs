@@ -207,7 +207,7 @@ impl RosArgs {
                 }
                 ParamSource::File(path) => {
                     let text = std::fs::read_to_string(path)
-                        .map_err(|e| ArgsError::ParamsFile { path: path.clone(), reason: e.to_string() })?;
+                        .map_err(|e| ArgsError::ParamsFile { path: path.clone(), reason: io_reason(&e) })?;
                     out.extend(
                         params_from_yaml(&text, fq_node)
                             .map_err(|reason| ArgsError::ParamsFile { path: path.clone(), reason })?,
@@ -216,6 +216,15 @@ impl RosArgs {
             }
         }
         Ok(out)
+    }
+}
+
+/// An I/O error's reason, in words for the two a user makes most.
+fn io_reason(e: &std::io::Error) -> String {
+    match e.kind() {
+        std::io::ErrorKind::NotFound => "does not exist".into(),
+        std::io::ErrorKind::IsADirectory => "is a folder, not a file".into(),
+        _ => e.to_string(),
     }
 }
 
@@ -230,7 +239,7 @@ impl RosArgs {
                 ParamSource::Value(n, _) => out.push(n.clone()),
                 ParamSource::File(path) => {
                     let text = std::fs::read_to_string(path)
-                        .map_err(|e| ArgsError::ParamsFile { path: path.clone(), reason: e.to_string() })?;
+                        .map_err(|e| ArgsError::ParamsFile { path: path.clone(), reason: io_reason(&e) })?;
                     let (_, exact) = params_from_yaml_split(&text, fq_node)
                         .map_err(|reason| ArgsError::ParamsFile { path: path.clone(), reason })?;
                     out.extend(exact.into_keys());

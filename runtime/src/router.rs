@@ -7,7 +7,7 @@
 //! lets every node publish first (two cameras' frames leave together) and only then handles what
 //! they published, so one camera's frame does not wait behind the other's whole chain.
 
-use crate::component::{Component, Msg, Outbox, Port};
+use crate::component::{Component, Msg, NodeError, Outbox, Port};
 use crate::params::Params;
 use crate::rosargs::{fq_name, resolve_topic, Remap};
 use std::collections::HashMap;
@@ -32,6 +32,8 @@ pub struct Placed {
     pub busy_ns: u64,
     /// The last message it refused, and why.
     pub last_error: Option<String>,
+    /// Refusals logged (each different from the one before).
+    logged: u64,
 }
 
 impl Placed {
@@ -49,16 +51,33 @@ impl Placed {
         let r = self.component.handle(input, msg, &mut out);
         self.busy_ns += t0.elapsed().as_nanos() as u64;
         if let Err(e) = r {
-            self.errors += 1;
-            let topic = self.inputs.get(input).map_or("?", |(_, t)| t.as_str()).to_string();
-            if self.errors <= 5 {
+            self.refuse(input, &e);
+        }
+        self.take_refusals(&mut out);
+        out
+    }
+    /// Counts a refused message of input `input`, logs the first few different reasons (a
+    /// reason repeated, such as a region of interest outside every frame, is logged once), keeps
+    /// the last.
+    fn refuse(&mut self, input: usize, e: &NodeError) {
+        self.errors += 1;
+        let topic = self.inputs.get(input).map_or("?", |(_, t)| t.as_str()).to_string();
+        let text = format!("{topic}: {e}");
+        if self.last_error.as_deref() != Some(text.as_str()) {
+            self.logged += 1;
+            if self.logged <= 5 {
                 log::warn!("{}: message on {topic} refused: {e}", self.fq_name());
-            } else if self.errors == 6 {
+            } else if self.logged == 6 {
                 log::warn!("{}: more messages refused; counting them quietly", self.fq_name());
             }
-            self.last_error = Some(format!("{topic}: {e}"));
         }
-        out
+        self.last_error = Some(text);
+    }
+    /// Counts the earlier messages the component refused while handling this one.
+    fn take_refusals(&mut self, out: &mut Outbox) {
+        for (input, e) in std::mem::take(&mut out.refused) {
+            self.refuse(input, &e);
+        }
     }
     /// Ticks the component (timed); returns what it published.
     pub fn tick(&mut self, now_ns: i64) -> Outbox {
@@ -66,6 +85,7 @@ impl Placed {
         let t0 = std::time::Instant::now();
         self.component.tick(now_ns, &mut out);
         self.busy_ns += t0.elapsed().as_nanos() as u64;
+        self.take_refusals(&mut out);
         out
     }
     /// Tells the component no more input is coming (timed); returns what it published.
@@ -74,6 +94,7 @@ impl Placed {
         let t0 = std::time::Instant::now();
         self.component.finish(&mut out);
         self.busy_ns += t0.elapsed().as_nanos() as u64;
+        self.take_refusals(&mut out);
         out
     }
 }
@@ -129,6 +150,7 @@ impl Router {
             handled: 0,
             busy_ns: 0,
             last_error: None,
+            logged: 0,
         });
         idx
     }

@@ -119,6 +119,17 @@ pub struct Roi {
     pub height: u32,
 }
 
+impl std::fmt::Display for Roi {
+    /// As the parameters read: `roi.x_offset 700, roi.y_offset 0, roi.width 40, roi.height 0`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "roi.x_offset {}, roi.y_offset {}, roi.width {}, roi.height {}",
+            self.x_offset, self.y_offset, self.width, self.height
+        )
+    }
+}
+
 /// Configuration of the detector. Every field is an `edge_detector` parameter of the same name.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -200,7 +211,7 @@ pub enum EdgeError {
     #[error(transparent)]
     Image(#[from] ImageError),
     /// The region of interest lies outside the image.
-    #[error("roi {roi:?} lies outside the {width}x{height} image")]
+    #[error("the region of interest ({roi}) lies outside the {width}x{height} image")]
     RoiOutside {
         /// The region.
         roi: Roi,

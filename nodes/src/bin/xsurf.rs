@@ -7,7 +7,7 @@
 //! xsurf bag info DIR
 //! xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--duration S]
 //! xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
-//! xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
+//! xsurf param list NODE | get NODE NAME | set NODE NAME VALUE [--timeout S]
 //! xsurf calibrate synth|intrinsics|placement|laser ...
 //! xsurf compose /NS/NODE_TYPE... [--ros-args ...]
 //! ```
@@ -39,7 +39,7 @@ const USAGE: &str = "usage:
       record topics from DDS into a bag (QoS recorded per topic); stops on Ctrl-C or after S
   xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
       publish a bag over DDS with its original timing (honours ROS_DOMAIN_ID, ROS_LOCALHOST_ONLY)
-  xsurf param list NODE | get NODE NAME | set NODE NAME VALUE
+  xsurf param list NODE | get NODE NAME | set NODE NAME VALUE [--timeout S]
       a node's parameters through the standard ROS 2 parameter services (like `ros2 param`)
   xsurf calibrate synth DIR [--size WxH] [--board COLSxROWS] [--square M] [--views N] [--noise S] [--seed N]
                         [--preset ideal|hard]
@@ -65,6 +65,81 @@ const USAGE: &str = "usage:
 
 /// The usage of one command (`xsurf bag info --help`: that block; `xsurf bag --help`: every
 /// `bag` block), or the whole usage when `args` names no command.
+/// Per command: its options explained, with defaults and units, and an example. Shown by
+/// `xsurf CMD --help` and after a usage error of that command, below its usage line.
+const DETAILS: &[(&str, &str)] = &[
+    ("demo", "options:
+  --out DIR          where the bag and the reconstruction go (default ./xsurf-demo)
+  --scene NAME       pyramid (default), phantom, sphere, cylinder, box or body
+  --size WxH         each camera's image, pixels (default 640x480; 32 to 8192 a side)
+  --speed M_S        the C-arm's speed, m/s (default 0.07; above 0, below 2)
+  --preset P         ideal (default) or hard: noise, blur, uneven light and dark surfaces
+  --encoding E       mono8 (default), rgb8 or bgr8
+example: xsurf demo --out /tmp/demo --scene phantom"),
+    ("synth", "options:
+  SCENE              pyramid, phantom, sphere, cylinder, box or body
+  -o DIR             the bag folder to write (written under a temporary name, renamed when complete)
+  --size WxH         each camera's image, pixels (default 640x480), or --rig FILE for a rig file's cameras
+  --speed M_S        the C-arm's speed, m/s (default 0.07)     --fps F   frames per second (default 30)
+  --encoding E       mono8 (default), rgb8 or bgr8             --seed N  noise seed, 0 or more (default 1)
+  --preset P         ideal (default) or hard                   --zstd    compress the bag's chunks
+  --compressed F     jpeg or png: sensor_msgs/CompressedImage; --jpeg-quality Q, 1 to 100 (default 90)
+  --frames N         N frames per camera as image files instead of a bag
+example: xsurf synth phantom -o /tmp/phantom-bag --preset hard --zstd"),
+    ("reconstruct", "options:
+  BAG                a rosbag2 folder (MCAP): images or compressed images, camera_info, /tf, /tf_static
+  --out DIR          where the surfaces go; an earlier reconstruction's own files there are replaced
+  --params-file FILE the nodes' parameters (ROS 2 YAML, as for `ros2 run --params-file`)
+  --xray FILE.dcm    the radiograph to place under the surface
+  --quiet            no progress
+exit codes: 0 done, 1 failed, 2 usage, 3 files written but the result is incomplete (see report.json)
+example: xsurf reconstruct /tmp/phantom-bag --xray /tmp/phantom-bag/xray.dcm --out /tmp/phantom"),
+    ("bag info", "example: xsurf bag info /tmp/phantom-bag"),
+    ("bag record", "options:
+  -o DIR             the bag folder to write          TOPIC... or --all   what to record
+  --zstd             compress the chunks              --duration S        stop after S seconds
+example: xsurf bag record -o /tmp/rec /surface/cloud /surface/mesh /tf --duration 30"),
+    ("bag play", "options:
+  --rate R           speed factor (default 1)         --loop              start again at the end
+  --clock            publish /clock (for use_sim_time) --topics T1,T2     only these topics
+  --start-offset S   skip the first S seconds         --delay S           wait S seconds for subscribers first (default 1)
+example: ROS_LOCALHOST_ONLY=1 xsurf bag play /tmp/phantom-bag --clock"),
+    ("param", "options:
+  NODE               the fully qualified node name, e.g. /cam1/edge_detector
+  --timeout S        how long to wait for the node's parameter services (default 15)
+example: xsurf param set /cam1/edge_detector min_strength 20"),
+    ("calibrate synth", "options:
+  DIR                the folder for the set (board views, tabletop views, laser lines, calibrate.sh, truth_rig.yaml)
+  --size WxH         image size (default 640x480)     --board COLSxROWS   inner corners (default 9x6)
+  --square M         square side, m (default 0.02765) --views N           board views per camera, 3 to 500 (default 20)
+  --noise S          image noise, grey levels (default 2)  --seed N       0 or more (default 1)
+  --preset P         ideal (default) or hard (shadows, glare, blur, JPEG)
+example: xsurf calibrate synth /tmp/calset && bash /tmp/calset/calibrate.sh"),
+    ("calibrate intrinsics", "options:
+  IMAGE...           board views (PNG, JPEG or PGM)   --board COLSxROWS --square M   the board (inner corners, m)
+  -o CAMERA.yaml     the camera_calibration YAML      --name N            the camera's name (default: the file's stem)
+  --model M          plumb_bob (default) or rational_polynomial
+  --report DIR       report.json and plots (default <output>_intrinsics_report/)
+example: xsurf calibrate intrinsics views/cam1_*.png --board 9x6 --square 0.02765 -o cam1.yaml"),
+    ("calibrate placement", "options:
+  --board-origin X,Y[,Z]  corner 0 of the board on the tabletop, in `table`, m   --board-yaw DEG   its turn (default 0)
+  per camera: --camera NAME --intrinsics CAMERA.yaml --travels T[,T...] IMAGE... (one travel, m, per image)
+example: xsurf calibrate placement --board 9x6 --square 0.02765 --board-origin -0.11,0.07 -o rig.yaml \\
+           --camera cam1 --intrinsics cam1.yaml --travels 0,0.03 p/cam1_0.png p/cam1_1.png"),
+    ("calibrate laser", "options:
+  --rig RIG          the rig with the cameras placed   -o RIG             where to write it (default: --rig)
+  per camera: --camera NAME --heights H[,H...] IMAGE... (the tabletop's height, m, per image)
+example: xsurf calibrate laser --rig rig.yaml --camera cam1 --heights 0,0.05,0.1 l/cam1_0.png l/cam1_1.png l/cam1_2.png"),
+    ("launch", "options:
+  FILE               a ROS 2 YAML launch file (node: pkg, exec, name, namespace, param, remap; arg; let)
+  --composed         all nodes in one process, connected in memory
+  NAME:=VALUE        a launch argument
+example: xsurf launch launch-config/xsurf.launch.yaml params:=launch-config/params.yaml"),
+    ("calibrate scan", "options:
+  --max-translation M  refuse a correction beyond this, m   --max-rotation DEG   or beyond this turn
+example: xsurf calibrate scan /tmp/pyramid-bag --rig rig.yaml -o rig.yaml"),
+];
+
 fn command_usage(args: &[String]) -> String {
     let words: Vec<&str> = args.iter().map(String::as_str).take_while(|a| !a.starts_with('-')).collect();
     let mut blocks: Vec<Vec<&str>> = Vec::new();
@@ -88,7 +163,25 @@ fn command_usage(args: &[String]) -> String {
             .collect();
         if !chosen.is_empty() {
             let body: Vec<String> = chosen.iter().map(|b| b.join("\n")).collect();
-            return format!("usage:\n{}\n\n(all commands: xsurf --help; version: xsurf --version)", body.join("\n"));
+            // One command chosen: its options and an example too.
+            let detail = match chosen.as_slice() {
+                [b] => {
+                    let h = head(b);
+                    DETAILS
+                        .iter()
+                        .find(|(cmd, _)| {
+                            let c: Vec<&str> = cmd.split(' ').collect();
+                            h.len() >= c.len() && h.iter().zip(&c).all(|(a, w)| a.split('|').next() == Some(*w))
+                        })
+                        .map(|(_, d)| format!("\n{d}\n"))
+                        .unwrap_or_default()
+                }
+                _ => String::new(),
+            };
+            return format!(
+                "usage:\n{}\n{detail}\n(all commands: xsurf --help; version: xsurf --version)",
+                body.join("\n")
+            );
         }
     }
     USAGE.to_string()
@@ -142,7 +235,15 @@ impl Args {
     fn num<T: std::str::FromStr>(&self, name: &str, default: T) -> anyhow::Result<T> {
         match self.get(name) {
             None => Ok(default),
-            Some(v) => v.parse().map_err(|_| usage(format!("{name}: {v:?} is not a number"))),
+            Some(v) => v.parse().map_err(|_| {
+                // What the option takes, in words: a seed or a count is a whole number >= 0.
+                let kind = match std::any::type_name::<T>() {
+                    "u8" | "u16" | "u32" | "u64" | "usize" => "a whole number, 0 or more",
+                    "i8" | "i16" | "i32" | "i64" | "isize" => "a whole number",
+                    _ => "a number",
+                };
+                usage(format!("{name}: {v:?} is not {kind}"))
+            }),
         }
     }
 }
@@ -308,6 +409,13 @@ fn cmd_reconstruct(args: &[String]) -> anyhow::Result<()> {
     };
     let r = offline::reconstruct(&opts)?;
     print_report(&r, out);
+    let own = opts.bag.join(synth::XRAY_FILE);
+    if opts.xray.is_none() && own.is_file() {
+        println!(
+            "  radiograph: not placed, none given; the bag holds one: --xray {} places it under the surface",
+            own.display()
+        );
+    }
     let problems = r.problems();
     if !problems.is_empty() {
         return Err(anyhow!(Incomplete(problems)));
@@ -478,12 +586,12 @@ fn cmd_launch(args: &[String]) -> ExitCode {
         } else if file.is_none() && !a.starts_with('-') {
             file = Some(PathBuf::from(a));
         } else {
-            eprintln!("xsurf launch: unexpected argument {a:?}\n{USAGE}");
+            eprintln!("xsurf launch: unexpected argument {a:?}\n{}", command_usage(&["launch".to_string()]));
             return ExitCode::from(2);
         }
     }
     let Some(file) = file else {
-        eprintln!("xsurf launch: name a launch file\n{USAGE}");
+        eprintln!("xsurf launch: name a launch file\n{}", command_usage(&["launch".to_string()]));
         return ExitCode::from(2);
     };
     let nodes = match xsurf_nodes::launch::load(&file, &cli) {

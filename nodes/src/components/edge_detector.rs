@@ -9,11 +9,6 @@ use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
 
-/// An `f32` default as the `f64` it was written as (0.15, not 0.15000000596046448).
-fn as_written(v: f32) -> f64 {
-    v.to_string().parse().unwrap_or(f64::from(v))
-}
-
 /// The parameters of `edge_detector`.
 pub fn declarations() -> Vec<ParamDecl> {
     let d = EdgeConfig::default();
@@ -48,19 +43,19 @@ pub fn declarations() -> Vec<ParamDecl> {
         decl("roi.height", V::Integer(0), "px", "rows searched (0: to the edge)"),
         decl(
             "min_strength",
-            V::Double(as_written(d.min_strength)),
+            V::from_f32(d.min_strength),
             "grey levels",
             "smallest peak height above the local background (8-bit scale)",
         ),
         decl(
             "noise_factor",
-            V::Double(as_written(d.noise_factor)),
+            V::from_f32(d.noise_factor),
             "",
             "the peak must also exceed this many local noise standard deviations",
         ),
         decl(
             "peak_fraction",
-            V::Double(as_written(d.peak_fraction)),
+            V::from_f32(d.peak_fraction),
             "",
             "samples above background + this fraction of the peak take part in the centre",
         ),
@@ -71,34 +66,34 @@ pub fn declarations() -> Vec<ParamDecl> {
             "largest half-width searched around a peak",
         ),
         decl("flank_px", V::Integer(d.flank_px.into()), "px", "length of each background flank"),
-        decl("max_width_px", V::Double(as_written(d.max_width_px)), "px", "wider peaks (FWHM) are rejected as smeared"),
+        decl("max_width_px", V::from_f32(d.max_width_px), "px", "wider peaks (FWHM) are rejected as smeared"),
         decl(
             "min_width_px",
-            V::Double(as_written(d.min_width_px)),
+            V::from_f32(d.min_width_px),
             "px",
             "narrower peaks (FWHM) are rejected: set it for a camera whose line is wide (edge overshoot, fine texture)",
         ),
         decl(
             "gradient_threshold",
-            V::Double(as_written(d.gradient_threshold)),
+            V::from_f32(d.gradient_threshold),
             "grey levels",
             "for method gradient: the five-pixel rise that marks the line",
         ),
         decl(
             "color_offset_px",
-            V::Double(as_written(d.color_offset_px)),
+            V::from_f32(d.color_offset_px),
             "px",
             "colour is sampled this far either side of the line",
         ),
         decl(
             "min_side_ratio",
-            V::Double(as_written(d.min_side_ratio)),
+            V::from_f32(d.min_side_ratio),
             "",
             "a line rises above the background on both sides: the lower rise is at least this fraction of the higher (a step is not a line)",
         ),
         decl(
             "narrow_width_px",
-            V::Double(as_written(d.narrow_width_px)),
+            V::from_f32(d.narrow_width_px),
             "px",
             "lines narrower than this (FWHM) are located by a pixel-integrated Gaussian fit, whatever the method (no pixel locking)",
         ),
@@ -116,7 +111,7 @@ pub fn declarations() -> Vec<ParamDecl> {
         ),
         decl(
             "max_jump_px",
-            V::Double(as_written(d.max_jump_px)),
+            V::from_f32(d.max_jump_px),
             "px",
             "largest step of the line centre between neighbouring rows (columns) of one run",
         ),

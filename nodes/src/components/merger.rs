@@ -13,7 +13,9 @@
 //! the bounds) is logged with its reason and counted; the calibrated placement then stands.
 //! Where the cameras overlap, each region is kept from the camera that sees it better (brighter line) and the
 //! other camera's samples there are averaged into it (`fuse_distance_m`, `core/src/fuse.rs`), so
-//! the merged surface is one layer; then each grid is meshed and the surfaces are combined. The merge waits `merge_delay_s` after END so the
+//! the merged surface is one layer; then each grid is meshed, the surfaces are combined, the
+//! seams between them stitched (`zipper`, `core/src/zipper.rs`) and the small holes left closed
+//! (`max_hole_edges`, `core/src/holes.rs`). The merge waits `merge_delay_s` after END so the
 //! meshers' final clouds arrive first. The radiograph placed by `xray_aligner`
 //! (`/xray/overlay`, marker id = scan id) goes under the surface in `scene.wrl`, `scene.glb`
 //! and `preview.png`, with `xray.png` beside them; one that arrives after the merge (a
@@ -27,6 +29,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use xsurf_core::fuse::{one_surface, FuseConfig};
 use xsurf_core::geom::{Iso3, Plane};
+use xsurf_core::holes::fill_holes;
 use xsurf_core::mesh::{mesh_grid, Grid, Mesh, MeshConfig};
 use xsurf_core::register::{refine_grid, RefineConfig, RefineReport, ScanMotion};
 use xsurf_core::zipper::zipper;
@@ -51,16 +54,11 @@ pub fn declarations() -> Vec<ParamDecl> {
             "camera namespaces whose /<cam>/cloud are merged",
         ),
         decl("merge_delay_s", V::Double(1.0), "s", "wait after END before merging, so the final clouds arrive first"),
-        decl(
-            "max_edge_m",
-            V::Double(d.max_edge_m.into()),
-            "m",
-            "longest triangle edge when meshing each camera's grid",
-        ),
-        decl("min_angle_deg", V::Double(d.min_angle_deg.into()), "deg", "smallest triangle angle"),
+        decl("max_edge_m", V::from_f32(d.max_edge_m), "m", "longest triangle edge when meshing each camera's grid"),
+        decl("min_angle_deg", V::from_f32(d.min_angle_deg), "deg", "smallest triangle angle"),
         decl(
             "fuse_distance_m",
-            V::Double(FuseConfig::default().min_distance_m.into()),
+            V::from_f32(FuseConfig::default().min_distance_m),
             "m",
             "where cameras overlap, samples of different cameras closer than this are one observation: the \
              region's better-lit camera keeps it, averaged with the other's (0: keep both layers)",
@@ -71,6 +69,13 @@ pub fn declarations() -> Vec<ParamDecl> {
             "",
             "stitch the seams between the cameras' surfaces in the merged mesh (triangles within max_edge_m and \
              min_angle_deg)",
+        ),
+        decl(
+            "max_hole_edges",
+            V::Integer(64),
+            "",
+            "after zippering, each hole in the merged surface bounded by at most this many edges is closed with \
+             triangles whose new edges are within max_edge_m; wider holes and the outer rim stay open (0: none)",
         ),
         decl(
             "refine",
@@ -126,6 +131,19 @@ pub fn declarations() -> Vec<ParamDecl> {
     ]
 }
 
+/// The scan's C-arm motion, from `table -> carm` on `/tf`.
+#[derive(Debug, Clone, Copy)]
+struct Motion {
+    /// The first pose of the scan.
+    first: Iso3,
+    /// The latest.
+    last: Iso3,
+    /// The rotation summed from pose to pose, radians.
+    turned_rad: f64,
+    /// The largest change of the tabletop's lateral offset or height from the first pose, m.
+    offset_m: f64,
+}
+
 struct Config {
     cameras: Vec<String>,
     refine: Option<(RefineConfig, Plane)>,
@@ -134,6 +152,7 @@ struct Config {
     mesh: MeshConfig,
     fuse: FuseConfig,
     zipper: bool,
+    max_hole_edges: usize,
     transparency: f32,
     output_dir: Option<PathBuf>,
     frame_id: String,
@@ -192,6 +211,13 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         mesh,
         fuse: FuseConfig { min_distance_m: fuse as f32, mesh, ..FuseConfig::default() },
         zipper: p.bool("zipper")?,
+        max_hole_edges: {
+            let n = p.i64("max_hole_edges")?;
+            usize::try_from(n)
+                .ok()
+                .filter(|&n| n <= 100_000)
+                .ok_or_else(|| Params::invalid("max_hole_edges", format!("must be in 0..=100000, got {n}")))?
+        },
         transparency: transparency as f32,
         output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
         frame_id: p.string("frame_id")?,
@@ -231,9 +257,8 @@ pub struct MergerNode {
     seam_triangles: u64,
     /// `carm -> <cam>_optical_frame` from `/tf_static`.
     statics: TfBuffer,
-    /// The scan's C-arm motion: its first `table -> carm` and the largest change of angle
-    /// (rad) and of the across / height offsets (m) since.
-    motion: Option<(Iso3, f64, f64)>,
+    /// The scan's C-arm motion so far.
+    motion: Option<Motion>,
     /// The last merge's cloud and mesh, published again between scans.
     last_outputs: super::Republisher,
 }
@@ -307,7 +332,8 @@ impl MergerNode {
         if self.cfg.zipper && meshes.len() > 1 {
             let before = merged.triangles.len();
             let z = zipper(&mut merged, &camera, self.cfg.mesh.max_edge_m, self.cfg.mesh.min_angle_deg);
-            self.seam_triangles += (z.bridges + z.closings) as u64;
+            let h = fill_holes(&mut merged, self.cfg.mesh.max_edge_m, self.cfg.max_hole_edges);
+            self.seam_triangles += (z.bridges + z.closings + h.triangles) as u64;
             // The seams are a surface of their own in the scene files.
             let mut seams = Mesh {
                 positions: merged.positions.clone(),
@@ -380,20 +406,20 @@ impl MergerNode {
                 records.extend(refuse(&names[1..], None, "no table -> carm on /tf during the scan".into()));
                 return (Vec::new(), records);
             }
-            Some((_, angle, offset)) if angle > MAX_ANGLE_CHANGE_RAD || offset > MAX_OFFSET_CHANGE_M => {
+            Some(m) if m.turned_rad > MAX_ANGLE_CHANGE_RAD || m.offset_m > MAX_OFFSET_CHANGE_M => {
                 records.extend(refuse(
                     &names[1..],
                     None,
                     format!(
-                        "the C-arm turned {:.3} deg or the tabletop moved {:.1} mm during the scan; the refinement \
-                         needs one angle and height per scan",
-                        angle.to_degrees(),
-                        offset * 1e3
+                        "table -> carm turned {:.3} deg in all and the tabletop moved up to {:.1} mm during the \
+                         scan; the refinement needs one angle and height per scan",
+                        m.turned_rad.to_degrees(),
+                        m.offset_m * 1e3
                     ),
                 ));
                 return (Vec::new(), records);
             }
-            Some((pose, _, _)) => ScanMotion { table_from_carm: pose },
+            Some(m) => ScanMotion { table_from_carm: m.first },
         };
         let (first, rest) = grids.split_at_mut(1);
         let mut refined = Vec::new();
@@ -646,14 +672,17 @@ impl Component for MergerNode {
                 }) {
                     let pose = convert::iso(&t.transform);
                     self.motion = Some(match self.motion {
-                        None => (pose, 0.0, 0.0),
-                        Some((first, angle, offset)) => {
-                            let d = pose.translation - first.translation;
-                            (
-                                first,
-                                angle.max(first.rotation.angle_to(&pose.rotation)),
-                                offset.max(d.x.abs()).max(d.z.abs()),
-                            )
+                        None => Motion { first: pose, last: pose, turned_rad: 0.0, offset_m: 0.0 },
+                        Some(m) => {
+                            let d = pose.translation - m.first.translation;
+                            Motion {
+                                last: pose,
+                                // Summed from pose to pose, so a full turn reads 360 degrees,
+                                // not the 0 (or at most 180) between the first and the last.
+                                turned_rad: m.turned_rad + m.last.rotation.angle_to(&pose.rotation),
+                                offset_m: m.offset_m.max(d.x.abs()).max(d.z.abs()),
+                                ..m
+                            }
                         }
                     });
                 }
@@ -694,5 +723,34 @@ impl Component for MergerNode {
             ("seam_triangles", self.seam_triangles),
             ("write_errors", self.write_errors),
         ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use xsurf_core::geom::{Quat, Vec3};
+
+    /// A turntable scan: `table -> carm` turns 358.45 degrees in steps. The refusal gives the
+    /// whole turn, not the 1.55 degrees (or at most 180) between the first and the last pose.
+    #[test]
+    fn a_turn_is_reported_in_full() {
+        let params = Params::resolve(&declarations(), &BTreeMap::new()).unwrap();
+        let mut m = MergerNode::new(&params).unwrap();
+        let steps = 200;
+        let total = 358.45f64.to_radians();
+        let mut out = Outbox::default();
+        for k in 0..=steps {
+            let pose =
+                Iso3::from_parts(Vec3::ZERO, Quat::from_axis_angle(Vec3::Z, total * f64::from(k) / f64::from(steps)));
+            let tf = TFMessage { transforms: vec![convert::transform_stamped(i64::from(k), "table", "carm", &pose)] };
+            m.handle(m.cfg.cameras.len() + 2, &Msg::Tf(Arc::new(tf)), &mut out).unwrap();
+        }
+        let names = vec!["cam1".to_string(), "cam2".to_string()];
+        let (refined, records) = m.refine(&names, &mut [Grid::new(1), Grid::new(1)]);
+        assert!(refined.is_empty());
+        let why = records[0]["reason"].as_str().unwrap();
+        assert!(why.contains("turned 358.450 deg"), "{why}");
     }
 }

@@ -23,14 +23,14 @@ use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
 pub fn declarations() -> Vec<ParamDecl> {
     let d = MeshConfig::default();
     vec![
-        decl("max_edge_m", V::Double(d.max_edge_m.into()), "m", "longest triangle edge"),
+        decl("max_edge_m", V::from_f32(d.max_edge_m), "m", "longest triangle edge"),
         decl(
             "max_edge_per_m",
-            V::Double(d.max_edge_per_m.into()),
+            V::from_f32(d.max_edge_per_m),
             "m/m",
             "extra edge length per metre of camera range (PCL's depth term)",
         ),
-        decl("min_angle_deg", V::Double(d.min_angle_deg.into()), "deg", "smallest triangle angle (the study used 12)"),
+        decl("min_angle_deg", V::from_f32(d.min_angle_deg), "deg", "smallest triangle angle (the study used 12)"),
         decl(
             "fill_single_holes",
             V::Bool(d.fill_single_holes),
@@ -43,7 +43,7 @@ pub fn declarations() -> Vec<ParamDecl> {
             "",
             "Laplacian smoothing passes (boundary kept)",
         ),
-        decl("smooth_lambda", V::Double(d.smooth_lambda.into()), "", "Laplacian step, (0, 1]"),
+        decl("smooth_lambda", V::from_f32(d.smooth_lambda), "", "Laplacian step, (0, 1]"),
         decl(
             "cloud_rate_hz",
             V::Double(2.0),

@@ -9,6 +9,7 @@ use crate::tf::TfBuffer;
 use std::collections::VecDeque;
 use std::sync::Arc;
 use xsurf_core::camera::CameraModel;
+use xsurf_core::edge::LaserLine as CoreLine;
 use xsurf_core::triangulate::{CameraGeometry, Profile, Triangulator, TriangulatorConfig};
 use xsurf_msgs::sensor_msgs::{CameraInfo, PointCloud2};
 use xsurf_msgs::tf2_msgs::TFMessage;
@@ -131,7 +132,8 @@ pub struct TriangulatorNode {
     tf: TfBuffer,
     model: Option<(CameraModel, String)>,
     tri: Option<(Triangulator, String, CameraModel)>,
-    pending: VecDeque<Arc<LaserLine>>,
+    /// Lines waiting for their pose, each already checked and converted.
+    pending: VecDeque<(Arc<LaserLine>, Arc<CoreLine>)>,
     profile: Profile,
     lines: u64,
     profiles: u64,
@@ -187,30 +189,45 @@ impl TriangulatorNode {
         Ok(())
     }
 
-    /// Places the oldest pending line; `force` places it even if its pose is not bracketed yet.
-    fn drain(&mut self, out: &mut Outbox, force: bool) -> Result<(), NodeError> {
-        while let Some(line) = self.pending.front().cloned() {
+    /// The pose of the line at `stamp`, once it is known to be of this camera's image and the
+    /// triangulator for its frame is built.
+    fn place(&mut self, line: &LaserLine, stamp: i64, ahead: i64) -> Result<xsurf_core::geom::Iso3, NodeError> {
+        if let Some((m, _)) = &self.model {
+            if (m.width, m.height) != (line.image_width, line.image_height) {
+                return Err(NodeError::new(format!(
+                    "the line is of a {}x{} image, camera_info says {}x{}",
+                    line.image_width, line.image_height, m.width, m.height
+                )));
+            }
+        }
+        let pose = self.tf.predict_table_from_carm(stamp, ahead).map_err(|e| NodeError::new(e.to_string()))?;
+        self.ensure_triangulator(line.header.frame_id.trim_start_matches('/'))?;
+        Ok(pose)
+    }
+
+    /// Places the pending lines, oldest first, while their poses are bracketed; `force` places
+    /// them even if not. A line that cannot be placed is refused as itself (on `laser_line`,
+    /// whatever message triggered the placing), and the others go on: one bad line costs only
+    /// itself.
+    fn drain(&mut self, out: &mut Outbox, force: bool) {
+        while let Some((line, core)) = self.pending.front().cloned() {
             let stamp = line.header.stamp.nanos();
             let ahead = self.cfg.max_extrapolation_ns;
             let ready = self.model.is_some() && self.tf.latest_pose_stamp().is_some_and(|l| l >= stamp - ahead);
             if !ready && !force && self.pending.len() <= self.cfg.max_pending {
-                return Ok(());
+                return;
             }
             self.pending.pop_front();
-            let pose = match self.tf.predict_table_from_carm(stamp, ahead) {
+            let placed = self.place(&line, stamp, ahead);
+            let pose = match placed {
                 Ok(p) => p,
                 Err(e) => {
                     self.unplaced += 1;
-                    return Err(NodeError::new(format!("laser_line at {}: {e}", convert::fmt_stamp(stamp))));
+                    out.refuse(IN_LINE, NodeError::new(format!("line at {}: {e}", convert::fmt_stamp(stamp))));
+                    continue;
                 }
             };
-            let core = convert::core_line(&line).map_err(NodeError::new)?;
-            let frame = line.header.frame_id.trim_start_matches('/').to_string();
-            if let Err(e) = self.ensure_triangulator(&frame) {
-                self.unplaced += 1;
-                return Err(e);
-            }
-            let Some((tri, _, _)) = self.tri.as_ref() else { return Err(NodeError::new("no triangulator")) };
+            let Some((tri, _, _)) = self.tri.as_ref() else { continue };
             tri.triangulate(&core, &pose, &mut self.profile);
             self.profiles += 1;
             self.points += self.profile.valid() as u64;
@@ -219,7 +236,6 @@ impl TriangulatorNode {
                 convert::profile_cloud(&self.profile, convert::header(stamp, &self.cfg.table_frame));
             out.publish(0, Msg::Cloud(Arc::new(cloud)));
         }
-        Ok(())
     }
 }
 
@@ -251,17 +267,22 @@ impl Component for TriangulatorNode {
         match (input, msg) {
             (IN_LINE, Msg::LaserLine(l)) => {
                 self.lines += 1;
-                self.pending.push_back(l.clone());
-                self.drain(out, false)
+                // Checked on arrival, so that a malformed line is refused as itself.
+                let core = convert::core_line(l).map_err(NodeError::new)?;
+                self.pending.push_back((l.clone(), Arc::new(core)));
+                self.drain(out, false);
+                Ok(())
             }
             (IN_INFO, Msg::CameraInfo(i)) => {
                 let m = convert::camera_model(i).map_err(|e| NodeError::new(format!("camera_info: {e}")))?;
                 self.model = Some((m, i.header.frame_id.clone()));
-                self.drain(out, false)
+                self.drain(out, false);
+                Ok(())
             }
             (IN_TF, Msg::Tf(t)) => {
                 self.tf.add_dynamic(t);
-                self.drain(out, false)
+                self.drain(out, false);
+                Ok(())
             }
             (IN_TF_STATIC, Msg::Tf(t)) => {
                 self.tf.add_static(t);
@@ -272,7 +293,7 @@ impl Component for TriangulatorNode {
                 // At the end of a scan the lines still waiting for a pose are placed now, so the
                 // mesher has them before it closes the scan.
                 if e.event != ScanEvent::START {
-                    return self.drain(out, true);
+                    self.drain(out, true);
                 }
                 Ok(())
             }
@@ -280,11 +301,7 @@ impl Component for TriangulatorNode {
         }
     }
     fn finish(&mut self, out: &mut Outbox) {
-        while !self.pending.is_empty() {
-            if let Err(e) = self.drain(out, true) {
-                log::warn!("triangulator: {e}");
-            }
-        }
+        self.drain(out, true);
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
         vec![
@@ -293,5 +310,71 @@ impl Component for TriangulatorNode {
             ("points", self.points),
             ("unplaced_lines", self.unplaced),
         ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use std::collections::BTreeMap;
+    use xsurf_runtime::router::Router;
+
+    fn line(stamp_s: i32, n: usize, v: usize) -> Msg {
+        let mut l = LaserLine {
+            image_width: 64,
+            image_height: n as u32,
+            orientation: LaserLine::ORIENTATION_VERTICAL,
+            u: vec![10.0; n],
+            v: vec![1.0; v],
+            strength: vec![50.0; n],
+            width: vec![3.0; n],
+            ..LaserLine::default()
+        };
+        l.header.stamp.sec = stamp_s;
+        l.header.frame_id = "cam1_optical_frame".into();
+        Msg::LaserLine(Arc::new(l))
+    }
+
+    /// A malformed line is refused as itself, on arrival, under its own topic; a line that can
+    /// never be placed (no tf) is refused under laser_line too, when the scan ends, and the
+    /// others are not held up.
+    #[test]
+    fn a_bad_line_is_refused_under_its_own_topic_and_costs_only_itself() {
+        let params = Params::resolve(&declarations(), &BTreeMap::new()).unwrap();
+        let mut r = Router::new();
+        r.add(Box::new(TriangulatorNode::new(&params).unwrap()), "triangulator", "/cam1", &[]);
+        r.publish("/cam1/laser_line", &line(1, 40, 39));
+        let n = &r.nodes()[0];
+        assert_eq!(n.errors, 1);
+        assert!(
+            n.last_error.as_deref().unwrap().starts_with("/cam1/laser_line: LaserLine arrays disagree"),
+            "{:?}",
+            n.last_error
+        );
+        // Two good lines wait for their camera_info and pose; at the END of the scan they cannot
+        // be placed (no /tf at all): each is refused, as a laser_line, not as the event.
+        // The line of issue 24: a 0x0 image, orientation 9, 10 samples. And 10 samples for a
+        // 64x40 image.
+        let Msg::LaserLine(good) = line(0, 10, 10) else { unreachable!() };
+        let odd = LaserLine { image_width: 0, image_height: 0, orientation: 9, ..(*good).clone() };
+        r.publish("/cam1/laser_line", &Msg::LaserLine(Arc::new(odd)));
+        let last = |r: &Router| r.nodes()[0].last_error.clone().unwrap();
+        assert!(last(&r).contains("orientation 9"), "{}", last(&r));
+        let few = LaserLine { image_height: 40, ..(*good).clone() };
+        r.publish("/cam1/laser_line", &Msg::LaserLine(Arc::new(few)));
+        assert!(last(&r).contains("has 10 samples; a vertical line of a 64x40 image has 40"), "{}", last(&r));
+        assert_eq!(r.nodes()[0].errors, 3);
+        r.publish("/cam1/laser_line", &line(2, 40, 40));
+        r.publish("/cam1/laser_line", &line(3, 40, 40));
+        let end = xsurf_msgs::xsurf_msgs::ScanEvent { event: ScanEvent::END, ..Default::default() };
+        r.publish("/scan/events", &Msg::ScanEvent(Arc::new(end)));
+        let n = &r.nodes()[0];
+        assert_eq!(n.errors, 5, "{:?}", n.last_error);
+        assert!(
+            n.last_error.as_deref().unwrap().starts_with("/cam1/laser_line: line at 3.000000000"),
+            "{:?}",
+            n.last_error
+        );
     }
 }
