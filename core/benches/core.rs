@@ -151,16 +151,18 @@ fn merging(c: &mut Criterion) {
     g.bench_function("refine_only", |bch| {
         bch.iter(|| {
             let mut second = b.clone();
-            refine_grid(&a, &mut second, &cam, &plane, &motion, &RefineConfig::default()).unwrap();
+            // The pair needs no correction, so the refinement refuses one, after the same work.
+            let _ = refine_grid(&a, &mut second, &cam, &plane, &motion, &RefineConfig::default());
             second
         })
     });
-    // The merger's whole job with its defaults: refine, fuse, mesh both, combine, zipper.
-    g.bench_function("refine_fuse_mesh_combine_zipper", |bch| {
+    // The merger's whole job with its defaults: refine, fuse, mesh both, combine, zipper, close
+    // the small holes.
+    g.bench_function("refine_fuse_mesh_combine_zipper_fill", |bch| {
         bch.iter(|| {
             let mut grids = [a.clone(), b.clone()];
             let (first, second) = grids.split_at_mut(1);
-            refine_grid(&first[0], &mut second[0], &cam, &plane, &motion, &RefineConfig::default()).unwrap();
+            let _ = refine_grid(&first[0], &mut second[0], &cam, &plane, &motion, &RefineConfig::default());
             one_surface(&mut grids, &FuseConfig::default());
             let cfg = MeshConfig::default();
             let mut merged = mesh_grid(&grids[0], &cfg);
@@ -169,14 +171,41 @@ fn merging(c: &mut Criterion) {
             camera.extend(vec![1u8; second.positions.len()]);
             merged.append(&second);
             zipper(&mut merged, &camera, cfg.max_edge_m, cfg.min_angle_deg);
+            fill_holes(&mut merged, cfg.max_edge_m, 64);
             merged
         })
     });
     g.bench_function("mesh_combine_no_fuse", |bch| bch.iter(|| merge(None)));
+    // The seam steps alone, on the fused pair.
+    {
+        let mut grids = [a.clone(), b.clone()];
+        one_surface(&mut grids, &FuseConfig::default());
+        let cfg = MeshConfig::default();
+        let mut merged = mesh_grid(&grids[0], &cfg);
+        let mut camera = vec![0u8; merged.positions.len()];
+        let second = mesh_grid(&grids[1], &cfg);
+        camera.extend(vec![1u8; second.positions.len()]);
+        merged.append(&second);
+        g.bench_function("zipper_only", |bch| {
+            bch.iter(|| {
+                let mut m = merged.clone();
+                zipper(&mut m, &camera, cfg.max_edge_m, cfg.min_angle_deg);
+                m
+            })
+        });
+        zipper(&mut merged, &camera, cfg.max_edge_m, cfg.min_angle_deg);
+        g.bench_function("fill_only", |bch| {
+            bch.iter(|| {
+                let mut m = merged.clone();
+                fill_holes(&mut m, cfg.max_edge_m, 64)
+            })
+        });
+    }
     g.finish();
 }
 
 use xsurf_core::geom::{Iso3, Plane, Vec3};
+use xsurf_core::holes::fill_holes;
 use xsurf_core::register::{refine_grid, RefineConfig, ScanMotion};
 use xsurf_core::zipper::zipper;
 

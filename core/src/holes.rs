@@ -30,20 +30,41 @@ fn len(a: [f32; 3]) -> f32 {
     dot(a, a).sqrt()
 }
 
+/// The directed edges of a mesh: its triangles' (each vertex's outgoing edges with the third
+/// vertex, as [`Mesh::corners`] lists them), and the ones a fill added.
+struct Edges {
+    start: Vec<usize>,
+    out: Vec<(u32, u32)>,
+    added: HashSet<(u32, u32)>,
+}
+
+impl Edges {
+    fn new(mesh: &Mesh) -> Self {
+        let (start, out) = mesh.corners();
+        Self { start, out, added: HashSet::new() }
+    }
+    /// The triangles' edges from `a`: `(b, third vertex)`.
+    fn from(&self, a: u32) -> &[(u32, u32)] {
+        &self.out[self.start[a as usize]..self.start[a as usize + 1]]
+    }
+    fn has(&self, a: u32, b: u32) -> bool {
+        self.from(a).iter().any(|e| e.0 == b) || self.added.contains(&(a, b))
+    }
+}
+
 /// The boundary loops of `mesh`: each a cycle of vertices `v[0] -> v[1] -> ... -> v[0]` along
 /// directed edges used by one triangle only (none of them is used backwards), each vertex once
 /// per loop (a vertex where loops touch starts a loop of its own). Returned with, per edge
 /// `v[i] -> v[i+1]`, the normal of the triangle on it.
-fn boundary_loops(mesh: &Mesh, edges: &HashSet<(u32, u32)>) -> Vec<(Vec<u32>, Vec<[f32; 3]>)> {
+fn boundary_loops(mesh: &Mesh, edges: &Edges) -> Vec<(Vec<u32>, Vec<[f32; 3]>)> {
     let p = &mesh.positions;
     // Boundary edges from each vertex, with the normal of their triangle.
     let mut out: HashMap<u32, Vec<(u32, [f32; 3])>> = HashMap::new();
-    for t in &mesh.triangles {
-        let n = cross(sub(p[t[1] as usize], p[t[0] as usize]), sub(p[t[2] as usize], p[t[0] as usize]));
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            if !edges.contains(&(b, a)) {
-                out.entry(a).or_default().push((b, n));
+    for a in 0..p.len() as u32 {
+        for &(b, opp) in edges.from(a) {
+            if !edges.has(b, a) {
+                let pa = p[a as usize];
+                out.entry(a).or_default().push((b, cross(sub(p[b as usize], pa), sub(p[opp as usize], pa))));
             }
         }
     }
@@ -55,10 +76,15 @@ fn boundary_loops(mesh: &Mesh, edges: &HashSet<(u32, u32)>) -> Vec<(Vec<u32>, Ve
             // Walk from s; where the walk meets a vertex already on its path, the cycle since
             // then is a loop.
             let mut path: Vec<(u32, [f32; 3])> = vec![(s, n)];
+            // Where each vertex of the path is on it (the rim is a loop of thousands).
+            let mut on_path: HashMap<u32, usize> = HashMap::from([(s, 0)]);
             let mut at = b;
             loop {
-                if let Some(j) = path.iter().position(|&(v, _)| v == at) {
+                if let Some(&j) = on_path.get(&at) {
                     let cycle = path.split_off(j);
+                    for (v, _) in &cycle {
+                        on_path.remove(v);
+                    }
                     loops.push(cycle.into_iter().unzip());
                     if path.is_empty() {
                         break;
@@ -66,6 +92,7 @@ fn boundary_loops(mesh: &Mesh, edges: &HashSet<(u32, u32)>) -> Vec<(Vec<u32>, Ve
                 }
                 match out.get_mut(&at).and_then(Vec::pop) {
                     Some((next, n)) => {
+                        on_path.insert(at, path.len());
                         path.push((at, n));
                         at = next;
                     }
@@ -106,7 +133,7 @@ fn triangulate_loop(
     v: &[u32],
     normals: &[[f32; 3]],
     max_edge: f32,
-    edges: &HashSet<(u32, u32)>,
+    edges: &Edges,
 ) -> Option<Vec<[u32; 3]>> {
     let n = v.len();
     let at = |i: usize| p[v[i] as usize];
@@ -117,9 +144,7 @@ fn triangulate_loop(
     };
     // A chord i-k (not a loop edge) may be new only if the mesh lacks it in either direction.
     let chord_ok = |i: usize, k: usize| {
-        k == i + 1
-            || (i == 0 && k == n - 1)
-            || (d2(i, k) <= max2 && !edges.contains(&(v[i], v[k])) && !edges.contains(&(v[k], v[i])))
+        k == i + 1 || (i == 0 && k == n - 1) || (d2(i, k) <= max2 && !edges.has(v[i], v[k]) && !edges.has(v[k], v[i]))
     };
     // Per sub-polygon i..=k: (largest fold, area), the apex chosen, the normal of the triangle
     // on chord i-k (the neighbour of the triangle above it).
@@ -188,8 +213,7 @@ pub fn fill_holes(mesh: &mut Mesh, max_edge_m: f32, max_loop_edges: usize) -> Ho
     if mesh.triangles.is_empty() || !(max_edge_m > 0.0) {
         return report;
     }
-    let mut edges: HashSet<(u32, u32)> =
-        mesh.triangles.iter().flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]).collect();
+    let mut edges = Edges::new(mesh);
     let loops = boundary_loops(mesh, &edges);
     report.loops = loops.len();
     let mut added = Vec::new();
@@ -199,7 +223,7 @@ pub fn fill_holes(mesh: &mut Mesh, max_edge_m: f32, max_loop_edges: usize) -> Ho
         }
         let Some(tris) = triangulate_loop(&mesh.positions, &v, &normals, max_edge_m, &edges) else { continue };
         for t in &tris {
-            edges.extend([(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]);
+            edges.added.extend([(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]);
         }
         report.filled += 1;
         report.triangles += tris.len();
