@@ -78,6 +78,13 @@ impl Orientation {
             _ => None,
         }
     }
+    /// `vertical` / `horizontal`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Orientation::Vertical => "vertical",
+            Orientation::Horizontal => "horizontal",
+        }
+    }
 }
 
 /// Which signal of a colour image carries the laser.

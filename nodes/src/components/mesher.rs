@@ -10,9 +10,10 @@ use super::decl;
 use crate::convert;
 use std::path::PathBuf;
 use std::sync::Arc;
+use xsurf_core::edge::Orientation;
 use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
 use xsurf_core::triangulate::Profile;
-use xsurf_msgs::sensor_msgs::PointCloud2;
+use xsurf_msgs::sensor_msgs::{CameraInfo, PointCloud2};
 use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
@@ -76,6 +77,13 @@ pub fn declarations() -> Vec<ParamDecl> {
             "",
             "a stamp gap above this many nominal frame periods counts as dropped frames",
         ),
+        decl(
+            "line_orientation",
+            V::String("vertical".into()),
+            "",
+            "as the edge detector's: vertical (a sample per image row) or horizontal (per column); with \
+             camera_info it gives the samples per frame, and a profile of another size is refused",
+        ),
     ]
 }
 
@@ -87,6 +95,7 @@ struct Config {
     camera: String,
     frame_id: String,
     gap_factor: f64,
+    orientation: Orientation,
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
@@ -109,6 +118,9 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     if !(gap_factor > 1.0) {
         return Err(Params::invalid("gap_factor", format!("{gap_factor:?} must be > 1")));
     }
+    let orient = p.string("line_orientation")?;
+    let orientation = Orientation::parse(&orient)
+        .ok_or_else(|| Params::invalid("line_orientation", format!("{orient:?} is not vertical or horizontal")))?;
     let dir = p.string("output_dir")?;
     let republish = p.f64("mesh_republish_s")?;
     if !(0.0..=3600.0).contains(&republish) {
@@ -122,6 +134,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         camera: p.string("camera")?,
         frame_id: p.string("frame_id")?,
         gap_factor,
+        orientation,
     })
 }
 
@@ -183,10 +196,15 @@ pub struct MesherNode {
     mesh_points: u64,
     files_written: u64,
     outside_scan: u64,
+    /// Samples per frame by the camera (camera_info and the line orientation), once known.
+    samples: Option<usize>,
+    /// Profiles refused for a size the camera does not give.
+    bad_profiles: u64,
 }
 
 const IN_PROFILE: usize = 0;
 const IN_EVENTS: usize = 1;
+const IN_INFO: usize = 2;
 const OUT_CLOUD: usize = 0;
 const OUT_MESH: usize = 1;
 /// Longest run of empty columns inserted for a stamp gap.
@@ -213,6 +231,8 @@ impl MesherNode {
             mesh_points: 0,
             files_written: 0,
             outside_scan: 0,
+            samples: None,
+            bad_profiles: 0,
         })
     }
 
@@ -225,6 +245,15 @@ impl MesherNode {
     }
 
     fn push(&mut self, stamp: i64, p: &Profile) -> Result<(), NodeError> {
+        // The grid's size comes from the camera, not from whichever profile arrives first.
+        if let Some(n) = self.samples.filter(|&n| n != p.points.len()) {
+            self.bad_profiles += 1;
+            return Err(NodeError::new(format!(
+                "profile has {} samples; the camera (camera_info, {} line) gives {n}",
+                p.points.len(),
+                self.cfg.orientation.name()
+            )));
+        }
         if self.grid.frames() == 0 {
             self.grid = Grid::new(p.points.len());
         }
@@ -310,6 +339,7 @@ impl Component for MesherNode {
         vec![
             Port::new("profile", PointCloud2::TYPE_NAME, QosClass::Reliable),
             Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
+            Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
         ]
     }
     fn outputs(&self) -> Vec<Port> {
@@ -367,6 +397,22 @@ impl Component for MesherNode {
                 }
                 Ok(())
             }
+            (IN_INFO, Msg::CameraInfo(i)) => {
+                let n = match self.cfg.orientation {
+                    Orientation::Vertical => i.height,
+                    Orientation::Horizontal => i.width,
+                };
+                if !xsurf_core::limits::image_side_ok(i.width) || !xsurf_core::limits::image_side_ok(i.height) {
+                    return Err(NodeError::new(format!(
+                        "camera_info size {}x{} is outside {} pixels a side",
+                        i.width,
+                        i.height,
+                        xsurf_core::limits::image_side_text()
+                    )));
+                }
+                self.samples = Some(n as usize);
+                Ok(())
+            }
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
         }
     }
@@ -389,6 +435,7 @@ impl Component for MesherNode {
             ("mesh_points", self.mesh_points),
             ("files_written", self.files_written),
             ("frames_outside_scans", self.outside_scan),
+            ("bad_profiles", self.bad_profiles),
         ]
     }
 }
@@ -409,5 +456,40 @@ mod tests {
             missing += m;
         }
         assert_eq!(missing, 2);
+    }
+    /// The grid's samples per frame come from camera_info: a stray 10-sample profile arriving
+    /// first no longer fixes the grid and costs the camera's real profiles (issue 24).
+    #[test]
+    fn the_grid_size_comes_from_the_camera() {
+        #![allow(clippy::unwrap_used)]
+        let params = Params::resolve(&declarations(), &Default::default()).unwrap();
+        let mut m = MesherNode::new(&params).unwrap();
+        let mut out = Outbox::default();
+        let info = CameraInfo { width: 64, height: 40, ..Default::default() };
+        m.handle(IN_INFO, &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
+        let profile = |n: usize, sec: i32| {
+            let p = Profile {
+                points: vec![[0.1, 0.2, 0.3]; n],
+                intensity: vec![50.0; n],
+                rgb: None,
+                range: vec![0.5; n],
+                outside_volume: 0,
+            };
+            let mut h = xsurf_msgs::std_msgs::Header::default();
+            h.stamp.sec = sec;
+            Msg::Cloud(Arc::new(convert::profile_cloud(&p, h)))
+        };
+        let e = m.handle(IN_PROFILE, &profile(10, 1), &mut out).unwrap_err();
+        assert!(
+            e.to_string().contains("profile has 10 samples; the camera (camera_info, vertical line) gives 40"),
+            "{e}"
+        );
+        for sec in 2..6 {
+            m.handle(IN_PROFILE, &profile(40, sec), &mut out).unwrap();
+        }
+        assert_eq!((m.frames, m.bad_profiles, m.grid.samples()), (4, 1, 40));
+        // A camera_info that no camera has is refused by name.
+        let bad = CameraInfo { width: 0, height: 0, ..Default::default() };
+        assert!(m.handle(IN_INFO, &Msg::CameraInfo(Arc::new(bad)), &mut out).unwrap_err().to_string().contains("0x0"));
     }
 }
