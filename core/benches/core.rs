@@ -156,6 +156,16 @@ fn merging(c: &mut Criterion) {
             second
         })
     });
+    // Both grids meshed and combined, with each vertex's camera.
+    let cfg = MeshConfig::default();
+    let combined = |grids: &[Grid], cfg: &MeshConfig| {
+        let mut merged = mesh_grid(&grids[0], cfg);
+        let mut camera = vec![0u8; merged.positions.len()];
+        let second = mesh_grid(&grids[1], cfg);
+        camera.extend(vec![1u8; second.positions.len()]);
+        merged.append(&second);
+        (merged, camera)
+    };
     // The merger's whole job with its defaults: refine, fuse, mesh both, combine, zipper, close
     // the small holes.
     g.bench_function("refine_fuse_mesh_combine_zipper_fill", |bch| {
@@ -164,12 +174,7 @@ fn merging(c: &mut Criterion) {
             let (first, second) = grids.split_at_mut(1);
             let _ = refine_grid(&first[0], &mut second[0], &cam, &plane, &motion, &RefineConfig::default());
             one_surface(&mut grids, &FuseConfig::default());
-            let cfg = MeshConfig::default();
-            let mut merged = mesh_grid(&grids[0], &cfg);
-            let mut camera = vec![0u8; merged.positions.len()];
-            let second = mesh_grid(&grids[1], &cfg);
-            camera.extend(vec![1u8; second.positions.len()]);
-            merged.append(&second);
+            let (mut merged, camera) = combined(&grids, &cfg);
             zipper(&mut merged, &camera, cfg.max_edge_m, cfg.min_angle_deg);
             fill_holes(&mut merged, cfg.max_edge_m, 64);
             merged
@@ -180,12 +185,7 @@ fn merging(c: &mut Criterion) {
     {
         let mut grids = [a.clone(), b.clone()];
         one_surface(&mut grids, &FuseConfig::default());
-        let cfg = MeshConfig::default();
-        let mut merged = mesh_grid(&grids[0], &cfg);
-        let mut camera = vec![0u8; merged.positions.len()];
-        let second = mesh_grid(&grids[1], &cfg);
-        camera.extend(vec![1u8; second.positions.len()]);
-        merged.append(&second);
+        let (mut merged, camera) = combined(&grids, &cfg);
         g.bench_function("zipper_only", |bch| {
             bch.iter(|| {
                 let mut m = merged.clone();

@@ -83,6 +83,14 @@ fn quality(g: &Grid, r: usize) -> Vec<f32> {
     q
 }
 
+/// The 4-neighbours of sample `i` in a grid of `ns` samples per frame and `n` samples.
+fn neighbours(i: usize, ns: usize, n: usize) -> impl Iterator<Item = usize> {
+    let s = i % ns;
+    [(s > 0).then(|| i - 1), (s + 1 < ns).then_some(i + 1), i.checked_sub(ns), Some(i + ns).filter(|&j| j < n)]
+        .into_iter()
+        .flatten()
+}
+
 /// Fusing decides sample by sample, so where one camera's line is brighter over a strip only
 /// one sample wide (a face the other camera sees almost edge-on), a single column of its samples
 /// survives between the other camera's kept samples, and no triangle reaches it: a gap. Such an
@@ -104,14 +112,7 @@ fn give_back_orphans(
             if !pts[i][0].is_finite() || meshed[i] {
                 continue;
             }
-            let s = i % ns;
-            let near = [
-                (s > 0).then(|| i - 1),
-                (s + 1 < ns).then_some(i + 1),
-                i.checked_sub(ns),
-                Some(i + ns).filter(|&j| j < pts.len()),
-            ];
-            if pts[i] != orig[i] || near.iter().flatten().any(|&j| fused_away(j)) {
+            if pts[i] != orig[i] || neighbours(i, ns, pts.len()).any(fused_away) {
                 orphans.push((k, i));
             }
         }
@@ -170,12 +171,6 @@ fn give_back_islands(
         let (pts, orig, ns) = (g.points(), &originals[k], g.samples().max(1));
         let n = pts.len();
         let kept = |i: usize| pts[i][0].is_finite();
-        let neighbours = |i: usize| {
-            let s = i % ns;
-            [(s > 0).then(|| i - 1), (s + 1 < ns).then_some(i + 1), i.checked_sub(ns), Some(i + ns).filter(|&j| j < n)]
-                .into_iter()
-                .flatten()
-        };
         let mut label = vec![u32::MAX; n];
         let mut stack = Vec::new();
         let mut region = Vec::new();
@@ -189,7 +184,7 @@ fn give_back_islands(
             let (mut fused_away, mut unseen) = (0usize, 0usize);
             while let Some(i) = stack.pop() {
                 region.push(i);
-                for j in neighbours(i) {
+                for j in neighbours(i, ns, n) {
                     if kept(j) {
                         if label[j] == u32::MAX {
                             label[j] = seed as u32;
@@ -211,7 +206,7 @@ fn give_back_islands(
             } else {
                 // Too large: label the rest of it so that it is not walked again.
                 while let Some(i) = stack.pop() {
-                    for j in neighbours(i) {
+                    for j in neighbours(i, ns, n) {
                         if kept(j) && label[j] == u32::MAX {
                             label[j] = seed as u32;
                             stack.push(j);

@@ -12,7 +12,7 @@
 //! that folds least is taken, then the one of least area (Liepa's weight). The outer rim of a
 //! surface is one long loop and is never filled.
 
-use crate::mesh::{cross, dot, sub, Mesh};
+use crate::mesh::{cross, dot, norm, sub, Mesh};
 use std::collections::{HashMap, HashSet};
 
 /// What hole filling did.
@@ -24,10 +24,6 @@ pub struct HoleReport {
     pub filled: usize,
     /// Triangles added.
     pub triangles: usize,
-}
-
-fn len(a: [f32; 3]) -> f32 {
-    dot(a, a).sqrt()
 }
 
 /// The directed edges of a mesh: its triangles' (each vertex's outgoing edges with the third
@@ -107,7 +103,7 @@ fn boundary_loops(mesh: &Mesh, edges: &Edges) -> Vec<(Vec<u32>, Vec<[f32; 3]>)> 
 /// The angle between two normals, radians (0: the triangles continue each other flat; pi: one
 /// folds back onto the other).
 fn angle(a: [f32; 3], b: [f32; 3]) -> f32 {
-    let d = len(a) * len(b);
+    let d = norm(a) * norm(b);
     if d > 0.0 {
         (dot(a, b) / d).clamp(-1.0, 1.0).acos()
     } else {
@@ -175,7 +171,7 @@ fn triangulate_loop(
                     continue;
                 }
                 let f = fold[a].max(fold[b]).max(angle(c, normal[a])).max(angle(c, normal[b]));
-                let s = area[a] + area[b] + len(c) / 2.0;
+                let s = area[a] + area[b] + norm(c) / 2.0;
                 let (f0, s0) = (fold[idx(i, k)], area[idx(i, k)]);
                 if f < f0 - ANGLE_TIE || (f < f0 + ANGLE_TIE && s < s0) {
                     fold[idx(i, k)] = f;
@@ -229,16 +225,14 @@ pub fn fill_holes(mesh: &mut Mesh, max_edge_m: f32, max_loop_edges: usize) -> Ho
         report.triangles += tris.len();
         added.extend(tris);
     }
-    mesh.triangles.extend(added);
-    if !mesh.normals.is_empty() {
-        mesh.compute_normals();
-    }
+    mesh.add_triangles(added);
     report
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::checks::{area, doubled_edges};
     use crate::mesh::{mesh_grid, Grid, MeshConfig};
     use crate::triangulate::Profile;
 
@@ -265,28 +259,10 @@ mod tests {
         mesh_grid(&g, &MeshConfig { fill_single_holes: false, ..MeshConfig::default() })
     }
 
-    fn area(m: &Mesh) -> f32 {
-        m.triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| m.positions[i as usize]);
-                len(cross(sub(b, a), sub(c, a))) / 2.0
-            })
-            .sum()
-    }
-
     fn boundary_edge_count(m: &Mesh) -> usize {
         let e: HashSet<(u32, u32)> =
             m.triangles.iter().flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]).collect();
         e.iter().filter(|&&(a, b)| !e.contains(&(b, a))).count()
-    }
-
-    /// Directed edges used twice (an overlap or a flipped triangle).
-    fn doubled_edges(m: &Mesh) -> usize {
-        let mut e: Vec<(u32, u32)> =
-            m.triangles.iter().flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]).collect();
-        e.sort_unstable();
-        e.windows(2).filter(|w| w[0] == w[1]).count()
     }
 
     #[test]

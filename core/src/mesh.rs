@@ -236,6 +236,15 @@ pub struct Mesh {
 }
 
 impl Mesh {
+    /// Adds triangles over the existing vertices; the normals are recomputed if the mesh has
+    /// them.
+    pub fn add_triangles(&mut self, triangles: Vec<[u32; 3]>) {
+        self.triangles.extend(triangles);
+        if !self.normals.is_empty() {
+            self.compute_normals();
+        }
+    }
+
     /// Appends another mesh (indices shifted).
     pub fn append(&mut self, other: &Mesh) {
         let base = self.positions.len() as u32;
@@ -401,6 +410,34 @@ pub(crate) fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
 }
 pub(crate) fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+pub(crate) fn norm(a: [f32; 3]) -> f32 {
+    dot(a, a).sqrt()
+}
+
+/// Checks of a mesh's shape, for the tests of the steps that add triangles.
+#[cfg(test)]
+pub(crate) mod checks {
+    use super::{cross, norm, sub, Mesh};
+
+    /// The total area of the triangles.
+    pub fn area(m: &Mesh) -> f32 {
+        m.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| m.positions[i as usize]);
+                norm(cross(sub(b, a), sub(c, a))) / 2.0
+            })
+            .sum()
+    }
+
+    /// Directed edges used twice (an overlap or a flipped triangle).
+    pub fn doubled_edges(m: &Mesh) -> usize {
+        let mut e: Vec<(u32, u32)> =
+            m.triangles.iter().flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]).collect();
+        e.sort_unstable();
+        e.windows(2).filter(|w| w[0] == w[1]).count()
+    }
 }
 
 /// True if the triangle `[pa, pb, pc]` has every edge within `max_edge` and its smallest angle

@@ -9,7 +9,7 @@
 //! jump in depth is never bridged, and they keep the surface's orientation.
 
 use crate::cells::Cells;
-use crate::mesh::{cross, dot, sub, triangle_ok, Mesh};
+use crate::mesh::{cross, dot, norm, sub, triangle_ok, Mesh};
 use std::collections::HashSet;
 
 /// What the zipper did.
@@ -21,10 +21,6 @@ pub struct ZipperReport {
     pub bridges: usize,
     /// Triangles added to close the fans between two bridges.
     pub closings: usize,
-}
-
-fn len(a: [f32; 3]) -> f32 {
-    dot(a, a).sqrt()
 }
 
 /// The mesher's test on triangle `(a, b, c)` of `p`.
@@ -97,7 +93,7 @@ pub fn zipper(mesh: &mut Mesh, camera: &[u8], max_edge_m: f32, min_angle_deg: f3
             {
                 return;
             }
-            let cost = len(sub(pc, pa)) + len(sub(pc, pb));
+            let cost = norm(sub(pc, pa)) + norm(sub(pc, pb));
             if best.is_none_or(|(bc, _)| cost < bc) {
                 best = Some((cost, c));
             }
@@ -140,7 +136,7 @@ pub fn zipper(mesh: &mut Mesh, camera: &[u8], max_edge_m: f32, min_angle_deg: f3
                 continue;
             }
             let both = linked(d, v) && linked(e, v);
-            let cost = len(sub(pv, pd)) + len(sub(pv, pe));
+            let cost = norm(sub(pv, pd)) + norm(sub(pv, pe));
             if best.is_none_or(|(b2, c2, _)| (both, -cost) > (b2, -c2)) {
                 best = Some((both, cost, v));
             }
@@ -150,16 +146,14 @@ pub fn zipper(mesh: &mut Mesh, camera: &[u8], max_edge_m: f32, min_angle_deg: f3
             report.closings += 1;
         }
     }
-    mesh.triangles.extend(added);
-    if !mesh.normals.is_empty() {
-        mesh.compute_normals();
-    }
+    mesh.add_triangles(added);
     report
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::checks::{area, doubled_edges};
     use crate::mesh::{mesh_grid, Grid, MeshConfig};
     use crate::triangulate::Profile;
 
@@ -184,24 +178,6 @@ mod tests {
         let mut m = a;
         m.append(&b);
         (m, camera)
-    }
-
-    fn area(m: &Mesh) -> f32 {
-        m.triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| m.positions[i as usize]);
-                len(cross(sub(b, a), sub(c, a))) / 2.0
-            })
-            .sum()
-    }
-
-    /// Directed edges used twice (inconsistent orientation or overlap).
-    fn doubled_edges(m: &Mesh) -> usize {
-        let mut e: Vec<(u32, u32)> =
-            m.triangles.iter().flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]).collect();
-        e.sort_unstable();
-        e.windows(2).filter(|w| w[0] == w[1]).count()
     }
 
     #[test]
