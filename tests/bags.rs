@@ -4,6 +4,7 @@
 
 mod common;
 use common::*;
+use std::path::Path;
 use xsurf_formats::bag::Bag;
 use xsurf_msgs::{cdr, sensor_msgs::CameraInfo, sensor_msgs::Image, tf2_msgs::TFMessage};
 
@@ -213,4 +214,76 @@ fn bag_info_checks_the_mcap_and_synth_leaves_no_half_bag() {
     let out = xsurf(&["bag", "info", fresh.to_str().unwrap()]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// rosbag2's own split files without metadata.yaml (`reindex_test_bags`, from the rosbag2
+/// repository: ../shared/realdata/README.md): `bag info` says how to index them, `bag reindex`
+/// writes the metadata.yaml `ros2 bag reindex` would, checked against the MCAP files counted by
+/// the `mcap` package and read back through it by `rosbags`. A file cut short (a recorder
+/// killed) is indexed up to its last whole message; sqlite3 storage is refused by name.
+#[test]
+fn rosbag2_split_files_without_metadata_are_reindexed() {
+    let src = root().join("../shared/realdata/rosbag2/rosbag2_py/test/resources/mcap/reindex_test_bags/multiple_files");
+    let dir = scratch("reindex");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(&src).unwrap().map(|e| e.unwrap().path()).collect();
+    files.sort();
+    for f in &files {
+        let to = dir.join(f.file_name().unwrap());
+        std::fs::copy(f, &to).unwrap();
+        // The fixtures are read-only; the copies are cut below.
+        std::fs::set_permissions(&to, std::os::unix::fs::PermissionsExt::from_mode(0o644)).unwrap();
+    }
+    let d = dir.to_str().unwrap();
+    assert_clean_failure(&xsurf(&["bag", "info", d]), 1, "`xsurf bag reindex DIR` writes its metadata.yaml");
+    let out = xsurf(&["bag", "reindex", d]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_clean_failure(&xsurf(&["bag", "reindex", d]), 1, "exists already");
+    let bag = xsurf_formats::bag::Bag::open(&dir).unwrap();
+    let m = &bag.metadata;
+    assert_eq!(m.files, ["multiple_files_0.mcap", "multiple_files_1.mcap", "multiple_files_2.mcap"]);
+    let info = xsurf(&["bag", "info", d]);
+    assert!(String::from_utf8_lossy(&info.stdout).contains("Count: 3177"), "{info:?}");
+    let Some(j) = checker("mcap_counts.py", &files.iter().map(|p| p.as_path()).collect::<Vec<_>>()) else { return };
+    let chatter = &j["topics"]["/chatter"];
+    assert_eq!(m.topics.len(), 1);
+    let t = &m.topics[0];
+    assert_eq!((t.name.as_str(), t.type_name.as_str()), ("/chatter", chatter["type"].as_str().unwrap()));
+    assert_eq!(t.serialization_format, chatter["encoding"].as_str().unwrap());
+    assert_eq!(t.message_count, chatter["count"].as_u64().unwrap());
+    assert_eq!(t.qos.map(|q| (q.reliable, q.depth)), Some((true, 1)), "the offered QoS from the channel metadata");
+    let per_file = j["files"].as_array().unwrap();
+    for (span, f) in m.file_spans.iter().zip(per_file) {
+        assert_eq!(span.message_count, f["count"].as_u64().unwrap());
+        assert_eq!(span.start_ns, f["first"].as_u64().unwrap());
+        assert_eq!(span.start_ns + span.duration_ns, f["last"].as_u64().unwrap());
+    }
+    assert_eq!(m.start_ns, per_file[0]["first"].as_u64().unwrap());
+    // rosbags reads the folder through the metadata.yaml written: every message.
+    let r = checker("mcap_counts.py", &[Path::new("--rosbags"), &dir]).unwrap();
+    assert_eq!(r["messages"].as_u64().unwrap(), m.message_count, "{r}");
+    // The last file cut short, as a killed recorder leaves it: indexed up to its last whole
+    // chunk. This file is one chunk of 529 messages followed by its index and summary: cut at
+    // half, the chunk is whole (the messages are kept, the index is lost); cut at a quarter,
+    // inside the chunk, none of its messages is.
+    let last = dir.join("multiple_files_2.mcap");
+    let bytes = std::fs::read(&last).unwrap();
+    for (cut_at, kept) in [(bytes.len() / 2, 529), (bytes.len() / 4, 0)] {
+        std::fs::write(&last, &bytes[..cut_at]).unwrap();
+        let out = xsurf(&["bag", "reindex", d, "--force"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success() && err.contains("multiple_files_2.mcap: MCAP error at byte offset"), "{err}");
+        let cut = xsurf_formats::bag::Bag::open(&dir).unwrap().metadata;
+        assert_eq!(cut.file_spans[2].message_count, kept, "cut at byte {cut_at}");
+        assert_eq!(cut.message_count, 1324 + 1324 + kept);
+    }
+    // sqlite3 storage: refused by name.
+    let sq =
+        root().join("../shared/realdata/rosbag2/rosbag2_py/test/resources/sqlite3/reindex_test_bags/multiple_files");
+    let sqd = scratch("reindex-sqlite");
+    std::fs::create_dir_all(&sqd).unwrap();
+    std::fs::copy(sq.join("multiple_files_0.db3"), sqd.join("multiple_files_0.db3")).unwrap();
+    assert_clean_failure(&xsurf(&["bag", "reindex", sqd.to_str().unwrap()]), 1, "sqlite3 storage");
+    std::fs::remove_dir_all(&dir).unwrap();
+    std::fs::remove_dir_all(&sqd).unwrap();
 }

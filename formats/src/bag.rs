@@ -246,6 +246,11 @@ impl BagWriter {
                 })
                 .collect(),
             files: vec![self.file_name.clone()],
+            file_spans: vec![FileSpan {
+                start_ns: start,
+                duration_ns: if self.count > 0 { self.end_ns - start + 1 } else { 0 },
+                message_count: self.count,
+            }],
             // rosbag2 records MCAP chunk compression only in the storage preset, not here.
             compression: String::new(),
             ros_distro: "jazzy".into(),
@@ -272,6 +277,17 @@ pub struct TopicMetadata {
     pub message_count: u64,
 }
 
+/// One storage file's messages: its first stamp, span and count (metadata.yaml `files`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct FileSpan {
+    /// First message, ns since the epoch.
+    pub start_ns: u64,
+    /// Last minus first, ns.
+    pub duration_ns: u64,
+    /// Messages in the file.
+    pub message_count: u64,
+}
+
 /// The contents of `metadata.yaml`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BagMetadata {
@@ -289,6 +305,9 @@ pub struct BagMetadata {
     pub topics: Vec<TopicMetadata>,
     /// Storage files, relative to the bag directory.
     pub files: Vec<String>,
+    /// Each storage file's own first stamp, span and message count, where known (a reindexed
+    /// bag of several files); empty: the bag's figures stand for its one file.
+    pub file_spans: Vec<FileSpan>,
     /// How the data is compressed, for display.
     pub compression: String,
     /// ROS distribution that wrote the bag.
@@ -310,9 +329,10 @@ impl BagMetadata {
         for t in &self.topics {
             let _ = writeln!(
                 y,
-                "    - topic_metadata:\n        name: {}\n        type: {}\n        serialization_format: cdr\n        offered_qos_profiles: {}\n        type_description_hash: \"\"\n      message_count: {}",
+                "    - topic_metadata:\n        name: {}\n        type: {}\n        serialization_format: {}\n        offered_qos_profiles: {}\n        type_description_hash: \"\"\n      message_count: {}",
                 yaml_str(&t.name),
                 yaml_str(&t.type_name),
+                yaml_str(&t.serialization_format),
                 yaml_str(&t.qos_text),
                 t.message_count
             );
@@ -322,14 +342,17 @@ impl BagMetadata {
             let _ = writeln!(y, "    - {}", yaml_str(f));
         }
         let _ = writeln!(y, "  files:");
-        for f in &self.files {
+        let whole =
+            FileSpan { start_ns: self.start_ns, duration_ns: self.duration_ns, message_count: self.message_count };
+        for (i, f) in self.files.iter().enumerate() {
+            let span = self.file_spans.get(i).copied().unwrap_or(whole);
             let _ = writeln!(
                 y,
                 "    - path: {}\n      starting_time:\n        nanoseconds_since_epoch: {}\n      duration:\n        nanoseconds: {}\n      message_count: {}",
                 yaml_str(f),
-                self.start_ns,
-                self.duration_ns,
-                self.message_count
+                span.start_ns,
+                span.duration_ns,
+                span.message_count
             );
         }
         let _ = writeln!(y, "  custom_data: ~\n  ros_distro: {}", yaml_str(&self.ros_distro));
@@ -401,6 +424,23 @@ impl BagMetadata {
         if files.is_empty() {
             return Err(err("relative_file_paths is empty".into()));
         }
+        // Each file's own span, where the `files` list (version 5 on) gives one per file.
+        let file_spans: Vec<FileSpan> = info
+            .get("files")
+            .and_then(serde_yaml::Value::as_sequence)
+            .map(|list| {
+                list.iter()
+                    .filter_map(|f| {
+                        Some(FileSpan {
+                            start_ns: f.get("starting_time")?.get("nanoseconds_since_epoch")?.as_u64()?,
+                            duration_ns: f.get("duration")?.get("nanoseconds")?.as_u64()?,
+                            message_count: f.get("message_count")?.as_u64()?,
+                        })
+                    })
+                    .collect()
+            })
+            .filter(|spans: &Vec<FileSpan>| spans.len() == files.len())
+            .unwrap_or_default();
         Ok(BagMetadata {
             version,
             storage_identifier: storage,
@@ -409,10 +449,130 @@ impl BagMetadata {
             message_count,
             topics,
             files,
+            file_spans,
             compression: compression_format.to_string(),
             ros_distro: info.get("ros_distro").and_then(serde_yaml::Value::as_str).unwrap_or("").to_string(),
         })
     }
+}
+
+/// What [`reindex`] found.
+#[derive(Debug, Clone)]
+pub struct Reindexed {
+    /// The metadata written.
+    pub metadata: BagMetadata,
+    /// Files that ended early (a recording killed before it finished): the file and the error;
+    /// their messages before it are counted.
+    pub cut: Vec<String>,
+}
+
+/// The storage files of a bag folder in rosbag2's order: `<name>_<N>.mcap` by N, then others
+/// by name.
+fn storage_files(dir: &Path) -> Result<Vec<String>, BagError> {
+    let rd = std::fs::read_dir(dir).map_err(|e| FileError::new(dir, e))?;
+    let mut names: Vec<String> = Vec::new();
+    let mut other = Vec::new();
+    for e in rd {
+        let name = e.map_err(|e| FileError::new(dir, e))?.file_name().to_string_lossy().into_owned();
+        if name.ends_with(".mcap") {
+            names.push(name);
+        } else if name.ends_with(".db3") {
+            other.push(name);
+        }
+    }
+    if names.is_empty() {
+        return Err(match other.first() {
+            Some(db) => BagError::Unsupported {
+                path: dir.join(db),
+                reason: "sqlite3 storage: only mcap bags are read (convert it with `ros2 bag convert`)".into(),
+            },
+            None => BagError::Metadata { path: dir.to_path_buf(), reason: "no .mcap storage file to index".into() },
+        });
+    }
+    let index = |n: &str| -> Option<u64> { n.strip_suffix(".mcap")?.rsplit_once('_')?.1.parse().ok() };
+    names.sort_by(|a, b| (index(a).is_none(), index(a), a).cmp(&(index(b).is_none(), index(b), b)));
+    Ok(names)
+}
+
+/// Writes the `metadata.yaml` of a bag folder that has none (split files left by a recorder
+/// that was killed, or copied without it), as `ros2 bag reindex` does: every MCAP storage file
+/// is read through, in rosbag2's order, for its topics (type, serialization, the offered QoS
+/// from the channel's metadata), message counts and times. A file that ends early is counted up
+/// to its last complete message and reported in [`Reindexed::cut`]. An existing metadata.yaml is
+/// replaced only with `overwrite`.
+pub fn reindex(dir: &Path, overwrite: bool) -> Result<Reindexed, BagError> {
+    let meta_path = dir.join("metadata.yaml");
+    if !dir.is_dir() {
+        return Err(BagError::Metadata { path: dir.to_path_buf(), reason: "not a folder".into() });
+    }
+    if meta_path.exists() && !overwrite {
+        return Err(BagError::Metadata {
+            path: meta_path,
+            reason: "exists already (reindex replaces it only when asked: --force)".into(),
+        });
+    }
+    let files = storage_files(dir)?;
+    let mut topics: Vec<TopicMetadata> = Vec::new();
+    let mut spans = Vec::new();
+    let mut cut = Vec::new();
+    for f in &files {
+        let path = dir.join(f);
+        let file = std::fs::File::open(&path).map_err(|e| FileError::new(&path, e))?;
+        let count = std::rc::Rc::new(std::cell::Cell::new(0));
+        let reader = mcap::io::MessageReader::new(Counting { inner: BufReader::new(file), count: count.clone() });
+        let (mut first, mut last, mut n) = (u64::MAX, 0u64, 0u64);
+        for m in reader {
+            let m = match m {
+                Ok(m) => m,
+                Err(e) => {
+                    cut.push(mcap_err(&path, count.get(), e).to_string());
+                    break;
+                }
+            };
+            first = first.min(m.log_time);
+            last = last.max(m.log_time);
+            n += 1;
+            let topic = &m.channel.topic;
+            match topics.iter_mut().find(|t| &t.name == topic) {
+                Some(t) => t.message_count += 1,
+                None => {
+                    let qos_text = m.channel.metadata.get("offered_qos_profiles").cloned().unwrap_or_default();
+                    topics.push(TopicMetadata {
+                        name: topic.clone(),
+                        type_name: m.channel.schema.as_ref().map(|s| s.name.clone()).unwrap_or_default(),
+                        serialization_format: m.channel.message_encoding.clone(),
+                        qos: Qos::from_metadata(&serde_yaml::Value::String(qos_text.clone())),
+                        qos_text,
+                        message_count: 1,
+                    });
+                }
+            }
+        }
+        spans.push(if n > 0 {
+            FileSpan { start_ns: first, duration_ns: last - first, message_count: n }
+        } else {
+            FileSpan::default()
+        });
+    }
+    let counted: Vec<&FileSpan> = spans.iter().filter(|s| s.message_count > 0).collect();
+    let start_ns = counted.iter().map(|s| s.start_ns).min().unwrap_or(0);
+    let end_ns = counted.iter().map(|s| s.start_ns + s.duration_ns).max().unwrap_or(0);
+    let message_count = spans.iter().map(|s| s.message_count).sum();
+    let metadata = BagMetadata {
+        version: 8,
+        storage_identifier: "mcap".into(),
+        start_ns,
+        // Inclusive of the last message, as the writer makes it (rosbags reads [start, start + duration]).
+        duration_ns: if message_count > 0 { end_ns - start_ns + 1 } else { 0 },
+        message_count,
+        topics,
+        files,
+        file_spans: spans,
+        compression: String::new(),
+        ros_distro: String::new(),
+    };
+    crate::write_bytes_atomic(&meta_path, metadata.to_yaml().as_bytes())?;
+    Ok(Reindexed { metadata, cut })
 }
 
 /// One message read from a bag.
@@ -446,8 +606,14 @@ impl Bag {
         if !dir.is_dir() {
             return Err(BagError::Metadata { path: dir.to_path_buf(), reason: "not a bag directory".into() });
         }
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| BagError::Metadata { path: path.clone(), reason: format!("cannot read: {e}") })?;
+        let text = std::fs::read_to_string(&path).map_err(|e| {
+            let hint = if e.kind() == std::io::ErrorKind::NotFound && storage_files(dir).is_ok() {
+                " (the folder holds .mcap files: `xsurf bag reindex DIR` writes its metadata.yaml)"
+            } else {
+                ""
+            };
+            BagError::Metadata { path: path.clone(), reason: format!("cannot read: {e}{hint}") }
+        })?;
         let metadata = BagMetadata::parse(&text, &path)?;
         for f in &metadata.files {
             if !dir.join(f).is_file() {
@@ -515,8 +681,10 @@ impl Bag {
         let _ = writeln!(s, "Storage id:        {} (metadata version {})", m.storage_identifier, m.version);
         let _ = writeln!(s, "ROS Distro:        {}", if m.ros_distro.is_empty() { "unknown" } else { &m.ros_distro });
         let _ = writeln!(s, "Duration:          {:.3}s", secs(m.duration_ns));
-        let _ = writeln!(s, "Start:             {:.9} (s since epoch)", secs(m.start_ns));
-        let _ = writeln!(s, "End:               {:.9} (s since epoch)", secs(m.start_ns + m.duration_ns));
+        // From the integer nanoseconds: an f64 of seconds since 1970 keeps only about 0.1 us.
+        let stamp = |ns: u64| format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000);
+        let _ = writeln!(s, "Start:             {} (s since epoch)", stamp(m.start_ns));
+        let _ = writeln!(s, "End:               {} (s since epoch)", stamp(m.start_ns + m.duration_ns));
         let _ = writeln!(s, "Messages:          {}", m.message_count);
         let w = m.topics.iter().map(|t| t.name.len()).max().unwrap_or(0);
         for (i, t) in m.topics.iter().enumerate() {

@@ -5,6 +5,7 @@
 //! xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding E] [--seed N] [--preset ideal|hard] [--zstd]
 //! xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
 //! xsurf bag info DIR
+//! xsurf bag reindex DIR [--force]
 //! xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--duration S]
 //! xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
 //! xsurf param list NODE | get NODE NAME | set NODE NAME VALUE [--timeout S]
@@ -35,6 +36,8 @@ const USAGE: &str = "usage:
       reconstruct a recorded scan offline: DIR/<cam>.ply, merged.ply, scene.wrl, scene.glb, report.json
   xsurf bag info DIR
       summarize a bag, like `ros2 bag info`
+  xsurf bag reindex DIR [--force]
+      write the metadata.yaml of a bag folder that has none, from its .mcap files (as `ros2 bag reindex`)
   xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--duration S]
       record topics from DDS into a bag (QoS recorded per topic); stops on Ctrl-C or after S
   xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
@@ -95,6 +98,10 @@ example: xsurf synth phantom -o /tmp/phantom-bag --preset hard --zstd"),
 exit codes: 0 done, 1 failed, 2 usage, 3 files written but the result is incomplete (see report.json)
 example: xsurf reconstruct /tmp/phantom-bag --xray /tmp/phantom-bag/xray.dcm --out /tmp/phantom"),
     ("bag info", "example: xsurf bag info /tmp/phantom-bag"),
+    ("bag reindex", "options:
+  DIR                a folder of <name>_<N>.mcap files (split files of a killed recorder, say)
+  --force            replace an existing metadata.yaml
+example: xsurf bag reindex /tmp/rec && xsurf bag info /tmp/rec"),
     ("bag record", "options:
   -o DIR             the bag folder to write          TOPIC... or --all   what to record
   --zstd             compress the chunks              --duration S        stop after S seconds
@@ -569,8 +576,24 @@ fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
             write_stdout(&bag.info());
             Ok(())
         }
-        Some(other) => Err(usage(format!("unknown bag command {other:?} (info, play, record)"))),
-        None => Err(usage("bag needs a command (info, play, record)")),
+        Some("reindex") => {
+            let a = Args::parse(&args[1..], &["--force"], &[])?;
+            let [dir] = a.positional.as_slice() else { return Err(usage("bag reindex needs one DIR")) };
+            let r = xsurf_formats::bag::reindex(Path::new(dir), a.has("--force"))?;
+            for c in &r.cut {
+                eprintln!("bag reindex: {c}; its messages before that are indexed");
+            }
+            println!(
+                "bag reindex: {}/metadata.yaml written: {} file(s), {} topic(s), {} messages",
+                dir,
+                r.metadata.files.len(),
+                r.metadata.topics.len(),
+                r.metadata.message_count
+            );
+            Ok(())
+        }
+        Some(other) => Err(usage(format!("unknown bag command {other:?} (info, play, record, reindex)"))),
+        None => Err(usage("bag needs a command (info, play, record, reindex)")),
     }
 }
 
