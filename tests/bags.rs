@@ -235,7 +235,11 @@ fn rosbag2_split_files_without_metadata_are_reindexed() {
         std::fs::set_permissions(&to, std::os::unix::fs::PermissionsExt::from_mode(0o644)).unwrap();
     }
     let d = dir.to_str().unwrap();
-    assert_clean_failure(&xsurf(&["bag", "info", d]), 1, "`xsurf bag reindex DIR` writes its metadata.yaml");
+    // Without metadata.yaml, `bag info` reads the files themselves and says so.
+    let info = xsurf(&["bag", "info", d]);
+    assert!(info.status.success(), "{info:?}");
+    assert!(String::from_utf8_lossy(&info.stdout).contains("Count: 3177"), "{info:?}");
+    assert!(String::from_utf8_lossy(&info.stderr).contains("has no metadata.yaml; indexed from its storage files"));
     let out = xsurf(&["bag", "reindex", d]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert_clean_failure(&xsurf(&["bag", "reindex", d]), 1, "exists already");
@@ -286,4 +290,39 @@ fn rosbag2_split_files_without_metadata_are_reindexed() {
     assert_clean_failure(&xsurf(&["bag", "reindex", sqd.to_str().unwrap()]), 1, "sqlite3 storage");
     std::fs::remove_dir_all(&dir).unwrap();
     std::fs::remove_dir_all(&sqd).unwrap();
+}
+
+/// What a recorder killed mid-scan leaves: MCAP storage cut short and no metadata.yaml. `bag
+/// info` reads the files themselves and names the cut; `reconstruct` rebuilds the surface from
+/// the frames before it and exits 3 saying the bag ended early.
+#[test]
+fn a_bag_cut_short_without_metadata_is_read_up_to_the_cut() {
+    let dir = scratch("killed-recorder");
+    std::fs::create_dir_all(&dir).unwrap();
+    let src = pyramid_bag();
+    let meta = Bag::open(src).unwrap().metadata;
+    let file = &meta.files[0];
+    let bytes = std::fs::read(src.join(file)).unwrap();
+    std::fs::write(dir.join(file), &bytes[..bytes.len() * 3 / 5]).unwrap();
+    let d = dir.to_str().unwrap();
+    let info = xsurf(&["bag", "info", d]);
+    let err = String::from_utf8_lossy(&info.stderr);
+    assert!(info.status.success(), "{err}");
+    assert!(err.contains("has no metadata.yaml") && err.contains("MCAP error at byte offset"), "{err}");
+    let indexed = Bag::open(&dir).unwrap();
+    let n = indexed.metadata.message_count;
+    assert!(n > meta.message_count / 3 && n < meta.message_count, "{n} of {} messages", meta.message_count);
+    let out_dir = scratch("killed-recorder-out");
+    let r = xsurf(&["reconstruct", d, "--out", out_dir.to_str().unwrap(), "--quiet"]);
+    assert_clean_failure(&r, 3, "the bag ended early");
+    let merged = xsurf_formats::ply::read(&mut std::io::BufReader::new(
+        std::fs::File::open(out_dir.join("merged.ply")).unwrap(),
+    ))
+    .unwrap();
+    assert!(merged.positions.len() > 5000, "{} points from the frames before the cut", merged.positions.len());
+    // Random bytes named like a storage file are no bag.
+    std::fs::write(dir.join(file), [7u8; 4096]).unwrap();
+    assert_clean_failure(&xsurf(&["bag", "info", d]), 1, "the storage files hold no message");
+    std::fs::remove_dir_all(&dir).unwrap();
+    std::fs::remove_dir_all(&out_dir).unwrap();
 }

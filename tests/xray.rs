@@ -69,7 +69,7 @@ fn bad_dicom_is_named_and_the_surface_still_written() {
     let bytes = std::fs::read(bag.join("xray.dcm")).unwrap();
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         ("truncated.dcm", bytes[..bytes.len() / 2].to_vec(), "truncated.dcm"),
-        ("text.dcm", b"not dicom at all".to_vec(), "not a readable DICOM file"),
+        ("text.dcm", b"not dicom at all".to_vec(), "not a DICOM file: the \"DICM\" prefix at byte offset 128 (PS3.10 7.1) is missing (the file ends at byte 16)"),
     ];
     for (name, data, what) in cases {
         let f = dir.join(name);

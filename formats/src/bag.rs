@@ -511,6 +511,13 @@ pub fn reindex(dir: &Path, overwrite: bool) -> Result<Reindexed, BagError> {
             reason: "exists already (reindex replaces it only when asked: --force)".into(),
         });
     }
+    let r = index(dir)?;
+    crate::write_bytes_atomic(&meta_path, r.metadata.to_yaml().as_bytes())?;
+    Ok(r)
+}
+
+/// The metadata of a bag folder from its MCAP storage files alone (see [`reindex`]).
+pub fn index(dir: &Path) -> Result<Reindexed, BagError> {
     let files = storage_files(dir)?;
     let mut topics: Vec<TopicMetadata> = Vec::new();
     let mut spans = Vec::new();
@@ -571,7 +578,6 @@ pub fn reindex(dir: &Path, overwrite: bool) -> Result<Reindexed, BagError> {
         compression: String::new(),
         ros_distro: String::new(),
     };
-    crate::write_bytes_atomic(&meta_path, metadata.to_yaml().as_bytes())?;
     Ok(Reindexed { metadata, cut })
 }
 
@@ -597,6 +603,9 @@ pub struct Bag {
     pub dir: PathBuf,
     /// Its metadata.
     pub metadata: BagMetadata,
+    /// Set when the folder had no metadata.yaml and the metadata was read from the storage
+    /// files (a recorder killed before it wrote one): what was cut short, if anything.
+    pub indexed: Option<Vec<String>>,
 }
 
 impl Bag {
@@ -606,21 +615,32 @@ impl Bag {
         if !dir.is_dir() {
             return Err(BagError::Metadata { path: dir.to_path_buf(), reason: "not a bag directory".into() });
         }
-        let text = std::fs::read_to_string(&path).map_err(|e| {
-            let hint = if e.kind() == std::io::ErrorKind::NotFound && storage_files(dir).is_ok() {
-                " (the folder holds .mcap files: `xsurf bag reindex DIR` writes its metadata.yaml)"
-            } else {
-                ""
-            };
-            BagError::Metadata { path: path.clone(), reason: format!("cannot read: {e}{hint}") }
-        })?;
+        let text = match std::fs::read_to_string(&path) {
+            Ok(t) => t,
+            // No metadata.yaml beside MCAP files (a recorder killed before it wrote it): read
+            // the files themselves, up to their last whole chunk, nothing written.
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound && storage_files(dir).is_ok() => {
+                let r = index(dir)?;
+                if r.metadata.message_count == 0 {
+                    if let Some(first) = r.cut.first() {
+                        // Nothing readable at all: not a bag, whatever the files are called.
+                        return Err(BagError::Metadata {
+                            path: path.clone(),
+                            reason: format!("does not exist, and the storage files hold no message: {first}"),
+                        });
+                    }
+                }
+                return Ok(Bag { dir: dir.to_path_buf(), metadata: r.metadata, indexed: Some(r.cut) });
+            }
+            Err(e) => return Err(BagError::Metadata { path: path.clone(), reason: format!("cannot read: {e}") }),
+        };
         let metadata = BagMetadata::parse(&text, &path)?;
         for f in &metadata.files {
             if !dir.join(f).is_file() {
                 return Err(BagError::Metadata { path, reason: format!("lists file {f}, which does not exist") });
             }
         }
-        Ok(Bag { dir: dir.to_path_buf(), metadata })
+        Ok(Bag { dir: dir.to_path_buf(), metadata, indexed: None })
     }
 
     /// Checks that every storage file is a whole MCAP file: the magic at its start and at its

@@ -91,9 +91,9 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
             [b'I', b'I', 42, 0, ..] | [b'M', b'M', 0, 42, ..] => " (it is a TIFF image)",
             _ => "",
         };
-        let found = if n < 132 { format!("the file ends at byte {n}") } else { "not there".into() };
+        let end = if n < 132 { format!(" (the file ends at byte {n})") } else { String::new() };
         return Err(err(format!(
-            "not a DICOM file{kind}: the \"DICM\" prefix at byte offset 128 (PS3.10 7.1) is {found}"
+            "not a DICOM file{kind}: the \"DICM\" prefix at byte offset 128 (PS3.10 7.1) is missing{end}"
         )));
     }
     let obj = OpenFileOptions::new().open_file(path).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;

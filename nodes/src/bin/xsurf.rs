@@ -572,7 +572,18 @@ fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
         Some("info") => {
             let [dir] = &args[1..] else { return Err(usage("bag info needs one DIR")) };
             let bag = xsurf_formats::bag::Bag::open(Path::new(dir))?;
-            bag.verify_storage()?;
+            match &bag.indexed {
+                // A recorder killed before it wrote metadata.yaml: what its files hold.
+                Some(cut) => {
+                    eprintln!(
+                        "bag info: {dir} has no metadata.yaml; indexed from its storage files (`xsurf bag reindex {dir}` writes one)"
+                    );
+                    for c in cut {
+                        eprintln!("bag info: {c}; counted up to there");
+                    }
+                }
+                None => bag.verify_storage()?,
+            }
             write_stdout(&bag.info());
             Ok(())
         }
