@@ -33,6 +33,23 @@ fn readme_lists_every_parameter_with_its_default() {
 }
 
 /// `cargo test -p xsurf-nodes --test docs -- --ignored --nocapture` prints the tables.
+/// Defaults print as written (`0.012`), not as an `f32` widened to `f64`
+/// (`0.012000000104308128`, which the docs and `--help` showed).
+#[test]
+fn defaults_print_as_written() {
+    for node in NODE_NAMES {
+        for d in xsurf_nodes::components::declarations(node).unwrap_or_default() {
+            let shown = d.default.to_string();
+            let digits = shown.chars().filter(char::is_ascii_digit).count();
+            assert!(
+                !matches!(d.default, xsurf_runtime::params::ParamValue::Double(_)) || digits <= 8,
+                "{node}: {} shows as {shown}",
+                d.name
+            );
+        }
+    }
+}
+
 #[test]
 #[ignore]
 fn print_parameter_tables() {
