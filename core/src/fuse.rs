@@ -171,14 +171,14 @@ fn give_back_islands(
         let (pts, orig, ns) = (g.points(), &originals[k], g.samples().max(1));
         let n = pts.len();
         let kept = |i: usize| pts[i][0].is_finite();
-        let mut label = vec![u32::MAX; n];
+        let mut seen = vec![false; n];
         let mut stack = Vec::new();
         let mut region = Vec::new();
         for seed in 0..n {
-            if !kept(seed) || label[seed] != u32::MAX {
+            if !kept(seed) || seen[seed] {
                 continue;
             }
-            label[seed] = seed as u32;
+            seen[seed] = true;
             stack.push(seed);
             region.clear();
             let (mut fused_away, mut unseen) = (0usize, 0usize);
@@ -186,8 +186,8 @@ fn give_back_islands(
                 region.push(i);
                 for j in neighbours(i, ns, n) {
                     if kept(j) {
-                        if label[j] == u32::MAX {
-                            label[j] = seed as u32;
+                        if !seen[j] {
+                            seen[j] = true;
                             stack.push(j);
                         }
                     } else if orig[j][0].is_finite() {
@@ -204,11 +204,11 @@ fn give_back_islands(
                 islands += 1;
                 give.extend(region.iter().map(|&i| (k, i)));
             } else {
-                // Too large: label the rest of it so that it is not walked again.
+                // Too large: mark the rest of it so that it is not walked again.
                 while let Some(i) = stack.pop() {
                     for j in neighbours(i, ns, n) {
-                        if kept(j) && label[j] == u32::MAX {
-                            label[j] = seed as u32;
+                        if kept(j) && !seen[j] {
+                            seen[j] = true;
                             stack.push(j);
                         }
                     }
@@ -326,4 +326,40 @@ pub fn min_cross_distance(grids: &[Grid]) -> f32 {
         }
     }
     best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::triangulate::Profile;
+
+    /// A flat 40 x 40 sample grid every 2 mm, `dz` above the table, the line's strength from
+    /// `strength(s, f)`.
+    fn flat(dz: f32, strength: impl Fn(usize, usize) -> f32) -> Grid {
+        let ns = 40;
+        let mut g = Grid::new(ns);
+        for f in 0..40 {
+            let points = (0..ns).map(|s| [s as f32 * 0.002, f as f32 * 0.002, dz]).collect();
+            let intensity = (0..ns).map(|s| strength(s, f)).collect();
+            g.push(f as i64, &Profile { intensity, range: vec![0.5; ns], points, ..Profile::default() }).unwrap();
+        }
+        g
+    }
+
+    /// Camera B sees a 3 x 3 patch brighter than camera A, inside A's region: fused sample by
+    /// sample (a window of one) B keeps that island, with a seam all round it; given back, A
+    /// keeps the whole plate and B nothing.
+    #[test]
+    fn a_small_island_goes_back_to_the_camera_around_it() {
+        let run = |min_region: usize| {
+            let bright = |s: usize, f: usize| if (19..22).contains(&s) && (19..22).contains(&f) { 200.0 } else { 50.0 };
+            let mut grids = [flat(0.0, |_, _| 100.0), flat(0.0005, bright)];
+            let cfg = FuseConfig { quality_radius: 0, min_region, ..FuseConfig::default() };
+            let r = one_surface(&mut grids, &cfg);
+            let kept = |g: &Grid| g.points().iter().filter(|p| p[0].is_finite()).count();
+            (kept(&grids[0]), kept(&grids[1]), r.islands)
+        };
+        assert_eq!(run(0), (1600 - 9, 9, 0), "without giving back, B keeps its island");
+        assert_eq!(run(50), (1600, 0, 1));
+    }
 }
