@@ -201,6 +201,13 @@ fn clear_outputs(dir: &Path, cameras: &[String]) -> anyhow::Result<()> {
 pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     let t_start = Instant::now();
     let bag = Bag::open(&opts.bag)?;
+    if bag.indexed.is_some() {
+        log::warn!(
+            "{}: no metadata.yaml; read from its storage files (`xsurf bag reindex {}` writes one)",
+            opts.bag.display(),
+            opts.bag.display()
+        );
+    }
     let meta = &bag.metadata;
     let topic_type: BTreeMap<&str, &str> =
         meta.topics.iter().map(|t| (t.name.as_str(), t.type_name.as_str())).collect();
