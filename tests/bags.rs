@@ -217,10 +217,10 @@ fn bag_info_checks_the_mcap_and_synth_leaves_no_half_bag() {
 }
 
 /// rosbag2's own split files without metadata.yaml (`reindex_test_bags`, from the rosbag2
-/// repository: ../shared/realdata/README.md): `bag info` says how to index them, `bag reindex`
-/// writes the metadata.yaml `ros2 bag reindex` would, checked against the MCAP files counted by
-/// the `mcap` package and read back through it by `rosbags`. A file cut short (a recorder
-/// killed) is indexed up to its last whole message; sqlite3 storage is refused by name.
+/// repository: ../shared/realdata/README.md): `bag info` reads them as they are and says so,
+/// `bag reindex` writes the metadata.yaml `ros2 bag reindex` would, checked against the MCAP
+/// files counted by the `mcap` package and read back through it by `rosbags`. A file cut short
+/// (a recorder killed) is indexed up to its last whole chunk; sqlite3 storage is refused by name.
 #[test]
 fn rosbag2_split_files_without_metadata_are_reindexed() {
     let src = root().join("../shared/realdata/rosbag2/rosbag2_py/test/resources/mcap/reindex_test_bags/multiple_files");
