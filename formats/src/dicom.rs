@@ -71,19 +71,11 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
         return Err(err(why));
     }
     // A DICOM file (PS3.10) is a 128-byte preamble and "DICM" before its meta group.
-    let mut head = [0u8; 132];
-    let n = std::fs::File::open(path)
-        .and_then(|mut f| {
-            let mut n = 0;
-            while n < head.len() {
-                match std::io::Read::read(&mut f, &mut head[n..])? {
-                    0 => break,
-                    k => n += k,
-                }
-            }
-            Ok(n)
-        })
+    let mut head = Vec::with_capacity(132);
+    std::fs::File::open(path)
+        .and_then(|f| std::io::Read::read_to_end(&mut std::io::Read::take(f, 132), &mut head))
         .map_err(|e| err(e.to_string()))?;
+    let n = head.len();
     if n < 132 || &head[128..132] != b"DICM" {
         let kind = match &head[..n.min(8)] {
             [0x89, b'P', b'N', b'G', ..] => " (it is a PNG image)",
