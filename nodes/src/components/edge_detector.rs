@@ -4,6 +4,8 @@ use super::decl;
 use crate::convert;
 use std::sync::Arc;
 use xsurf_core::edge::{Channel, EdgeConfig, EdgeDetector, LaserLine, Method, Orientation, Roi};
+use xsurf_core::limits;
+use xsurf_msgs::sensor_msgs::CameraInfo;
 use xsurf_msgs::xsurf_msgs::LaserLine as LineMsg;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
@@ -192,7 +194,12 @@ pub struct EdgeDetectorNode {
     samples_found: u64,
     frames_with_line: u64,
     bad_images: u64,
+    /// The image size camera_info gives, once one has arrived.
+    camera_size: Option<(u32, u32)>,
 }
+
+const IN_IMAGE: usize = 0;
+const IN_INFO: usize = 1;
 
 impl EdgeDetectorNode {
     /// Builds the node from its parameters.
@@ -206,6 +213,7 @@ impl EdgeDetectorNode {
             samples_found: 0,
             frames_with_line: 0,
             bad_images: 0,
+            camera_size: None,
         })
     }
 }
@@ -216,12 +224,18 @@ impl Component for EdgeDetectorNode {
     }
     fn inputs(&self) -> Vec<Port> {
         match self.transport {
-            Transport::Raw => vec![Port::new("image_raw", xsurf_msgs::sensor_msgs::Image::TYPE_NAME, QosClass::Sensor)],
-            Transport::Compressed => vec![Port::new(
-                "image_raw/compressed",
-                xsurf_msgs::sensor_msgs::CompressedImage::TYPE_NAME,
-                QosClass::Sensor,
-            )],
+            Transport::Raw => vec![
+                Port::new("image_raw", xsurf_msgs::sensor_msgs::Image::TYPE_NAME, QosClass::Sensor),
+                Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
+            ],
+            Transport::Compressed => vec![
+                Port::new(
+                    "image_raw/compressed",
+                    xsurf_msgs::sensor_msgs::CompressedImage::TYPE_NAME,
+                    QosClass::Sensor,
+                ),
+                Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
+            ],
         }
     }
     fn outputs(&self) -> Vec<Port> {
@@ -237,7 +251,23 @@ impl Component for EdgeDetectorNode {
         self.detector = EdgeDetector::new(config(p)?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
         Ok(())
     }
-    fn handle(&mut self, _input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+        if input == IN_INFO {
+            let Msg::CameraInfo(i) = msg else {
+                return Err(NodeError::new(format!("expected camera_info, got {}", msg.type_name())));
+            };
+            if !limits::image_side_ok(i.width) || !limits::image_side_ok(i.height) {
+                return Err(NodeError::new(format!(
+                    "camera_info size {}x{} is outside {} pixels a side",
+                    i.width,
+                    i.height,
+                    limits::image_side_text()
+                )));
+            }
+            self.camera_size = Some((i.width, i.height));
+            return Ok(());
+        }
+        debug_assert_eq!(input, IN_IMAGE);
         let at = |h: &xsurf_msgs::std_msgs::Header| format!("{}.{:09}", h.stamp.sec, h.stamp.nanosec);
         // A compressed image is decoded once, here where it enters the pipeline.
         let decoded;
@@ -258,6 +288,16 @@ impl Component for EdgeDetectorNode {
             }
             other => return Err(NodeError::new(format!("expected an image, got {}", other.type_name()))),
         };
+        // An image that contradicts its camera is refused where it enters.
+        if let Some((w, h)) = self.camera_size.filter(|&s| s != (view.width(), view.height())) {
+            self.bad_images += 1;
+            return Err(NodeError::new(format!(
+                "image at {} is {}x{}, camera_info says {w}x{h}",
+                at(header),
+                view.width(),
+                view.height()
+            )));
+        }
         let stats = self.detector.detect(&view, &mut self.line).map_err(NodeError::new)?;
         self.frames += 1;
         self.samples_found += u64::from(stats.found);
@@ -272,5 +312,53 @@ impl Component for EdgeDetectorNode {
             ("samples_found", self.samples_found),
             ("bad_images", self.bad_images),
         ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use xsurf_msgs::sensor_msgs::Image;
+
+    /// A mono8 frame with a bright vertical line at column `col`.
+    fn frame(width: u32, height: u32, col: u32, sec: i32) -> Msg {
+        let mut data = vec![10u8; (width * height) as usize];
+        for r in 0..height {
+            for (dc, v) in [(-1i32, 120u8), (0, 220), (1, 120)] {
+                data[(r * width) as usize + (col as i32 + dc) as usize] = v;
+            }
+        }
+        let mut img = Image { width, height, encoding: "mono8".into(), step: width, data, ..Default::default() };
+        img.header.stamp.sec = sec;
+        Msg::Image(Arc::new(img))
+    }
+
+    /// An image whose size contradicts camera_info is refused where it enters and counted;
+    /// the camera's own images go on (issue 24: one bad message costs only itself).
+    #[test]
+    fn images_that_contradict_camera_info_are_refused() {
+        let params = Params::resolve(&declarations(), &Default::default()).unwrap();
+        let mut n = EdgeDetectorNode::new(&params).unwrap();
+        let mut out = Outbox::default();
+        // Before any camera_info, an image is taken as it is.
+        n.handle(IN_IMAGE, &frame(80, 60, 40, 1), &mut out).unwrap();
+        let info = CameraInfo { width: 64, height: 40, ..Default::default() };
+        n.handle(IN_INFO, &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
+        let e = n.handle(IN_IMAGE, &frame(16, 12, 5, 2), &mut out).unwrap_err();
+        assert!(e.to_string().contains("image at 2.000000000 is 16x12, camera_info says 64x40"), "{e}");
+        for sec in 3..6 {
+            n.handle(IN_IMAGE, &frame(64, 40, 30, sec), &mut out).unwrap();
+        }
+        assert_eq!((n.frames, n.bad_images, n.frames_with_line), (4, 1, 4));
+        assert_eq!(out.items.len(), 4, "one laser_line per image taken");
+        let Msg::LaserLine(l) = &out.items[3].1 else { panic!("expected a line") };
+        assert_eq!((l.image_width, l.image_height), (64, 40));
+        assert!((l.u[20] - 30.0).abs() < 0.05, "{}", l.u[20]);
+        // A camera_info that no camera has is refused by name and changes nothing.
+        let bad = CameraInfo { width: 0, height: 40, ..Default::default() };
+        let e = n.handle(IN_INFO, &Msg::CameraInfo(Arc::new(bad)), &mut out).unwrap_err();
+        assert!(e.to_string().contains("camera_info size 0x40"), "{e}");
+        n.handle(IN_IMAGE, &frame(64, 40, 30, 7), &mut out).unwrap();
     }
 }

@@ -35,7 +35,7 @@ use xsurf_core::register::{refine_grid, RefineConfig, RefineReport, ScanMotion};
 use xsurf_core::zipper::zipper;
 use xsurf_formats::scene::{Scene, Surface, TexturedPlane};
 use xsurf_msgs::pointcloud;
-use xsurf_msgs::sensor_msgs::PointCloud2;
+use xsurf_msgs::sensor_msgs::{CameraInfo, PointCloud2};
 use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
@@ -238,7 +238,12 @@ type LastMerge = (u32, Mesh, Vec<(String, Mesh)>);
 /// The merger component.
 pub struct MergerNode {
     cfg: Config,
-    clouds: BTreeMap<usize, Arc<PointCloud2>>,
+    /// Each camera's latest grid of the scan, decoded and checked when it arrived, with its stamp.
+    clouds: BTreeMap<usize, (i64, Grid)>,
+    /// Each camera's image size by its camera_info, once known.
+    camera_sizes: BTreeMap<usize, (u32, u32)>,
+    /// The current scan's START stamp: an older cloud is a late one of an earlier scan.
+    scan_start_ns: Option<i64>,
     scan_id: u32,
     pending_deadline: Option<i64>,
     merges: u64,
@@ -269,6 +274,8 @@ impl MergerNode {
         Ok(Self {
             cfg: config(p)?,
             clouds: BTreeMap::new(),
+            camera_sizes: BTreeMap::new(),
+            scan_start_ns: None,
             scan_id: 0,
             pending_deadline: None,
             merges: 0,
@@ -290,23 +297,38 @@ impl MergerNode {
         })
     }
 
+    /// Decodes camera `i`'s cloud and checks it against the camera and the scan: a cloud whose
+    /// samples per frame no image of the camera has, or one stamped before this scan's START
+    /// (a late cloud of an earlier scan), is refused and the camera's grid so far stays.
+    fn check_cloud(&self, i: usize, c: &PointCloud2) -> Result<Grid, NodeError> {
+        let at = convert::fmt_stamp(c.header.stamp.nanos());
+        let grid = convert::cloud_grid(c).map_err(|e| NodeError::new(format!("cloud at {at}: {e}")))?;
+        if let Some(&(w, h)) = self.camera_sizes.get(&i) {
+            if c.height != w && c.height != h {
+                return Err(NodeError::new(format!(
+                    "cloud at {at} has {} samples per frame; the camera's {w}x{h} images (camera_info) give {h} (vertical lines) or {w} (horizontal)",
+                    c.height
+                )));
+            }
+        }
+        if let Some(start) = self.scan_start_ns.filter(|&s| c.header.stamp.nanos() < s) {
+            return Err(NodeError::new(format!(
+                "cloud at {at} is older than scan {}'s START at {}: a late cloud of an earlier scan",
+                self.scan_id,
+                convert::fmt_stamp(start)
+            )));
+        }
+        Ok(grid)
+    }
+
     fn merge(&mut self, out: &mut Outbox) {
         self.pending_deadline = None;
         if self.clouds.is_empty() {
             return;
         }
-        let mut grids: Vec<(String, Grid)> = Vec::new();
-        let mut stamp = 0;
-        for (&i, cloud) in &self.clouds {
-            stamp = stamp.max(cloud.header.stamp.nanos());
-            match convert::cloud_grid(cloud) {
-                Ok(g) => grids.push((self.cfg.cameras[i].clone(), g)),
-                Err(e) => {
-                    self.bad_clouds += 1;
-                    log::warn!("merger: /{}/cloud: {e}", self.cfg.cameras[i]);
-                }
-            }
-        }
+        let stamp = self.clouds.values().map(|(t, _)| *t).max().unwrap_or(0);
+        let grids: Vec<(String, Grid)> =
+            self.clouds.iter().map(|(&i, (_, g))| (self.cfg.cameras[i].clone(), g.clone())).collect();
         let (names, mut gs): (Vec<String>, Vec<Grid>) = grids.into_iter().unzip();
         let (refined, refinement) = self.refine(&names, &mut gs);
         if !refined.is_empty() {
@@ -614,6 +636,12 @@ impl Component for MergerNode {
         v.push(Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::Reliable));
         v.push(Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable));
         v.push(Port::new("/tf_static", TFMessage::TYPE_NAME, QosClass::Static));
+        v.extend(
+            self.cfg
+                .cameras
+                .iter()
+                .map(|c| Port::new(&format!("/{c}/camera_info"), CameraInfo::TYPE_NAME, QosClass::Sensor)),
+        );
         v
     }
     fn outputs(&self) -> Vec<Port> {
@@ -638,8 +666,20 @@ impl Component for MergerNode {
         let n = self.cfg.cameras.len();
         match (input, msg) {
             (i, Msg::Cloud(c)) if i < n => {
-                self.clouds.insert(i, c.clone());
+                let grid = self.check_cloud(i, c).inspect_err(|_| self.bad_clouds += 1)?;
+                self.clouds.insert(i, (c.header.stamp.nanos(), grid));
                 self.merged_current = false;
+                Ok(())
+            }
+            (i, Msg::CameraInfo(info)) if (n + 4..2 * n + 4).contains(&i) => {
+                let (w, h) = (info.width, info.height);
+                if !xsurf_core::limits::image_side_ok(w) || !xsurf_core::limits::image_side_ok(h) {
+                    return Err(NodeError::new(format!(
+                        "camera_info size {w}x{h} is outside {} pixels a side",
+                        xsurf_core::limits::image_side_text()
+                    )));
+                }
+                self.camera_sizes.insert(i - n - 4, (w, h));
                 Ok(())
             }
             (i, Msg::ScanEvent(e)) if i == n => {
@@ -652,6 +692,7 @@ impl Component for MergerNode {
                         self.clouds.clear();
                         self.motion = None;
                         self.scan_id = e.scan_id;
+                        self.scan_start_ns = Some(e.header.stamp.nanos());
                     }
                     ScanEvent::END => {
                         self.scan_id = e.scan_id;
@@ -752,5 +793,50 @@ mod tests {
         assert!(refined.is_empty());
         let why = records[0]["reason"].as_str().unwrap();
         assert!(why.contains("turned 358.450 deg"), "{why}");
+    }
+
+    /// A cloud that contradicts its camera, or a late one of an earlier scan, is refused where
+    /// it enters and counted; the camera's grid so far stays (issue 24).
+    #[test]
+    fn clouds_that_contradict_the_camera_or_the_scan_are_refused() {
+        use xsurf_core::triangulate::Profile;
+        let params = Params::resolve(&declarations(), &Default::default()).unwrap();
+        let mut m = MergerNode::new(&params).unwrap();
+        let mut out = Outbox::default();
+        let n = m.cfg.cameras.len();
+        let cloud = |samples: usize, frames: usize, sec: i32| {
+            let mut g = Grid::new(samples);
+            for f in 0..frames {
+                let p = Profile {
+                    points: vec![[0.1 * f as f32, 0.2, 0.3]; samples],
+                    intensity: vec![50.0; samples],
+                    rgb: None,
+                    range: vec![0.5; samples],
+                    outside_volume: 0,
+                };
+                g.push(f as i64, &p).unwrap();
+            }
+            let mut h = xsurf_msgs::std_msgs::Header::default();
+            h.stamp.sec = sec;
+            Msg::Cloud(Arc::new(convert::grid_cloud(&g, h)))
+        };
+        let mut start = ScanEvent { scan_id: 4, event: ScanEvent::START, ..Default::default() };
+        start.header.stamp.sec = 10;
+        m.handle(n, &Msg::ScanEvent(Arc::new(start)), &mut out).unwrap();
+        let info = CameraInfo { width: 64, height: 40, ..Default::default() };
+        m.handle(n + 4, &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
+        m.handle(0, &cloud(40, 5, 11), &mut out).unwrap();
+        m.handle(0, &cloud(64, 6, 12), &mut out).unwrap(); // horizontal lines: one per column
+        let e = m.handle(0, &cloud(10, 7, 13), &mut out).unwrap_err().to_string();
+        assert!(e.contains("has 10 samples per frame; the camera's 64x40 images"), "{e}");
+        let e = m.handle(0, &cloud(64, 8, 9), &mut out).unwrap_err().to_string();
+        assert!(e.contains("older than scan 4's START at 10.000000000"), "{e}");
+        assert_eq!(m.bad_clouds, 2);
+        let (stamp, grid) = &m.clouds[&0];
+        assert_eq!((*stamp, grid.samples(), grid.frames()), (12_000_000_000, 64, 6), "the last good cloud stays");
+        // Camera 2 has no camera_info yet: its cloud is taken as it is.
+        m.handle(1, &cloud(10, 3, 11), &mut out).unwrap();
+        let bad = CameraInfo { width: 64, height: 0, ..Default::default() };
+        assert!(m.handle(n + 5, &Msg::CameraInfo(Arc::new(bad)), &mut out).is_err());
     }
 }
