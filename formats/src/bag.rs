@@ -526,7 +526,7 @@ pub fn index(dir: &Path) -> Result<Reindexed, BagError> {
         let path = dir.join(f);
         let file = std::fs::File::open(&path).map_err(|e| FileError::new(&path, e))?;
         let count = std::rc::Rc::new(std::cell::Cell::new(0));
-        let reader = mcap::io::MessageReader::new(Counting { inner: BufReader::new(file), count: count.clone() });
+        let reader = message_reader(file, &count);
         let (mut first, mut last, mut n) = (u64::MAX, 0u64, 0u64);
         for m in reader {
             let m = match m {
@@ -744,6 +744,25 @@ impl<R: Read> Read for Counting<R> {
     }
 }
 
+/// The longest MCAP record (or decompressed chunk) read from a file of `file_len` bytes: 256
+/// times the file, at least 64 MiB and at most 1 GiB. A length field beyond it is a damaged
+/// file, refused by the reader, not an allocation of that size (found by the fuzz suite:
+/// `tests/fuzz/crashes/mcap/`).
+pub fn record_length_limit(file_len: u64) -> usize {
+    let l = file_len.saturating_mul(256).clamp(64 << 20, 1 << 30);
+    usize::try_from(l).unwrap_or(1 << 30)
+}
+
+/// An MCAP message reader over `file` that counts the bytes read into `count`.
+fn message_reader(
+    file: std::fs::File,
+    count: &std::rc::Rc<std::cell::Cell<u64>>,
+) -> mcap::io::MessageReader<Counting<BufReader<std::fs::File>>> {
+    let len = file.metadata().map(|m| m.len()).unwrap_or(u64::MAX);
+    let options = mcap::sans_io::LinearReaderOptions::default().with_record_length_limit(record_length_limit(len));
+    mcap::io::MessageReader::new_with_options(Counting { inner: BufReader::new(file), count: count.clone() }, options)
+}
+
 /// The MCAP file being read: its path, the bytes read so far, the reader.
 type OpenFile =
     (PathBuf, std::rc::Rc<std::cell::Cell<u64>>, mcap::io::MessageReader<Counting<BufReader<std::fs::File>>>);
@@ -776,8 +795,7 @@ impl Iterator for BagMessages {
                     }
                 };
                 let count = std::rc::Rc::new(std::cell::Cell::new(0));
-                let reader =
-                    mcap::io::MessageReader::new(Counting { inner: BufReader::new(file), count: count.clone() });
+                let reader = message_reader(file, &count);
                 self.current = Some((path, count, reader));
             }
             let (path, count, reader) = self.current.as_mut()?;

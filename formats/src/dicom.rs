@@ -64,6 +64,124 @@ fn name_of(tag: Tag) -> String {
     format!("{name} ({:04X},{:04X})", tag.0, tag.1)
 }
 
+/// Checks that every element and item of a DICOM file (PS3.10: preamble, "DICM", meta group,
+/// data set) that has a defined length fits in the file, before a parser allocates that length
+/// (found by the fuzz suite: a 1 KB file whose element said 4 GB made dicom-rs fill 4 GB).
+/// Sequences, items and undefined lengths are walked into; encapsulated pixel data's fragments
+/// are stepped over by their lengths. A deflated data set is checked only as far as its meta
+/// group.
+fn check_lengths(b: &[u8]) -> Result<(), String> {
+    use dicom_core::dictionary::{DataDictionary, DataDictionaryEntry};
+    #[derive(Clone, Copy, PartialEq)]
+    enum Syntax {
+        ExplicitLe,
+        ImplicitLe,
+        ExplicitBe,
+    }
+    let u16_at = |i: usize, be: bool| {
+        let v = [b[i], b[i + 1]];
+        if be {
+            u16::from_be_bytes(v)
+        } else {
+            u16::from_le_bytes(v)
+        }
+    };
+    let u32_at = |i: usize, be: bool| {
+        let v = [b[i], b[i + 1], b[i + 2], b[i + 3]];
+        if be {
+            u32::from_be_bytes(v)
+        } else {
+            u32::from_le_bytes(v)
+        }
+    };
+    const LONG_VRS: [VR; 13] =
+        [VR::OB, VR::OD, VR::OF, VR::OL, VR::OV, VR::OW, VR::SQ, VR::SV, VR::UC, VR::UN, VR::UR, VR::UT, VR::UV];
+    let mut pos = 132;
+    let mut syntax = Syntax::ExplicitLe;
+    let mut in_meta = true;
+    // Inside encapsulated pixel data, items are fragments of bytes, not data sets.
+    let mut fragments = false;
+    let mut transfer_syntax = String::new();
+    while pos < b.len() {
+        if in_meta && (b.len() - pos < 2 || u16_at(pos, false) != 0x0002) {
+            in_meta = false;
+            let ts = transfer_syntax.trim_end_matches(['\0', ' ']);
+            syntax = match ts {
+                "1.2.840.10008.1.2" => Syntax::ImplicitLe,
+                "1.2.840.10008.1.2.2" => Syntax::ExplicitBe,
+                // A deflated data set's lengths are those of the inflated stream.
+                "1.2.840.10008.1.2.1.99" => return Ok(()),
+                _ => Syntax::ExplicitLe,
+            };
+        }
+        let be = syntax == Syntax::ExplicitBe && !in_meta;
+        if b.len() - pos < 8 {
+            return Err(format!("the element header at byte offset {pos} is cut short by the end of the file"));
+        }
+        let (group, elem) = (u16_at(pos, be), u16_at(pos + 2, be));
+        let remaining = |header: usize| (b.len() - pos).saturating_sub(header);
+        if group == 0xFFFE {
+            // Item (E000), item delimiter (E00D), sequence delimiter (E0DD): tag and a 4-byte length.
+            let len = u32_at(pos + 4, be);
+            match elem {
+                0xE0DD => fragments = false,
+                0xE000 if len != u32::MAX => {
+                    if len as usize > remaining(8) {
+                        return Err(format!(
+                            "the item at byte offset {pos} says {len} bytes, the file has {} after it",
+                            remaining(8)
+                        ));
+                    }
+                    if fragments {
+                        pos += len as usize;
+                    }
+                }
+                _ => {}
+            }
+            pos += 8;
+            continue;
+        }
+        let (vr, len, header) = if syntax == Syntax::ImplicitLe && !in_meta {
+            let vr = dicom_dictionary_std::StandardDataDictionary
+                .by_tag(Tag(group, elem))
+                .map(|e| e.vr().relaxed())
+                .unwrap_or(VR::UN);
+            (vr, u32_at(pos + 4, false), 8)
+        } else {
+            // An unknown VR code is read as UN, with a 4-byte length, as dicom-rs reads it.
+            let vr = VR::from_binary([b[pos + 4], b[pos + 5]]).unwrap_or(VR::UN);
+            if LONG_VRS.contains(&vr) {
+                if b.len() - pos < 12 {
+                    return Err(format!("the element header at byte offset {pos} is cut short by the end of the file"));
+                }
+                (vr, u32_at(pos + 8, be), 12)
+            } else {
+                (vr, u32::from(u16_at(pos + 6, be)), 8)
+            }
+        };
+        if len == u32::MAX {
+            // Undefined length: a sequence, or encapsulated pixel data; walk into it.
+            fragments = vr != VR::SQ;
+            pos += header;
+            continue;
+        }
+        let tag = Tag(group, elem);
+        if len as usize > remaining(header) {
+            return Err(format!(
+                "{} at byte offset {pos} says {len} bytes, the file has {} after its header",
+                name_of(tag),
+                remaining(header)
+            ));
+        }
+        if in_meta && tag == tags::TRANSFER_SYNTAX_UID {
+            transfer_syntax = String::from_utf8_lossy(&b[pos + header..pos + header + len as usize]).into_owned();
+        }
+        // A sequence of defined length is walked into; any other value is stepped over.
+        pos += header + if vr == VR::SQ { 0 } else { len as usize };
+    }
+    Ok(())
+}
+
 /// Reads the radiograph in `path`.
 pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
     let err = |what: String| DicomError { file: path.to_path_buf(), what };
@@ -88,6 +206,8 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
             "not a DICOM file{kind}: the \"DICM\" prefix at byte offset 128 (PS3.10 7.1) is missing{end}"
         )));
     }
+    let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
+    check_lengths(&bytes).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;
     let obj = OpenFileOptions::new().open_file(path).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;
     let ts_uid = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']).to_string();
     let ts = TransferSyntaxRegistry
@@ -115,6 +235,30 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
     }
     let bits_allocated = uint(tags::BITS_ALLOCATED)?;
     let bits_stored = uint(tags::BITS_STORED)?;
+    // What decoding would allocate, bounded before it does (a damaged Rows, Columns or Number of
+    // Frames must not cost gigabytes): at most 1 GiB, and for compressed pixel data at most
+    // 256 times the file's size (or 64 MiB).
+    let frames = obj
+        .element_opt(tags::NUMBER_OF_FRAMES)
+        .ok()
+        .flatten()
+        .map(|e| e.to_int::<u32>().map_err(|e| err(format!("{}: {e}", name_of(tags::NUMBER_OF_FRAMES)))))
+        .transpose()?
+        .unwrap_or(1);
+    let decoded = u64::from(rows) * u64::from(cols) * u64::from(frames.max(1)) * u64::from(bits_allocated.div_ceil(8));
+    let limit = if ts.is_encapsulated_pixel_data() {
+        (bytes.len() as u64).saturating_mul(256).clamp(64 << 20, 1 << 30)
+    } else {
+        1 << 30
+    };
+    if decoded > limit {
+        return Err(err(format!(
+            "{rows}x{cols} pixels ({}, {}) in {frames} frame(s) would decode to {decoded} bytes, more than the {limit} a file of {} bytes may hold",
+            name_of(tags::ROWS),
+            name_of(tags::COLUMNS),
+            bytes.len()
+        )));
+    }
     if !matches!(bits_allocated, 8 | 16) || !(1..=bits_allocated).contains(&bits_stored) {
         return Err(err(format!(
             "{} {bits_allocated} with {} {bits_stored}: only 8- to 16-bit greyscale is supported",

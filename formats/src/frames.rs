@@ -168,6 +168,12 @@ pub fn png_frame(b: &[u8]) -> Result<Image, String> {
     let mut dec = png::Decoder::new(std::io::Cursor::new(b));
     dec.set_transformations(png::Transformations::EXPAND);
     let mut reader = dec.read_info().map_err(|e| e.to_string())?;
+    // The size is checked before the output buffer is allocated (as for JPEG).
+    let max = *xsurf_core::limits::IMAGE_SIDE_PX.end();
+    let (w, h) = (reader.info().width, reader.info().height);
+    if w > max || h > max {
+        return Err(format!("{w}x{h} is larger than {max} pixels a side"));
+    }
     let mut buf = vec![0; reader.output_buffer_size().unwrap_or(0)];
     let info = reader.next_frame(&mut buf).map_err(|e| e.to_string())?;
     buf.truncate(info.buffer_size());
@@ -242,6 +248,14 @@ pub fn write_pgm(path: &Path, img: &Image) -> Result<(), crate::FileError> {
 /// Decodes a JPEG (baseline or progressive; grey, YCbCr or RGB; not CMYK) into mono8 or rgb8.
 pub fn jpeg_frame(b: &[u8]) -> Result<Image, String> {
     let mut d = jpeg_decoder::Decoder::new(b);
+    // The size is checked before the decoder allocates it (a damaged frame header said
+    // 65535x65535: 4 GiB for a 600-byte image, found by the fuzz suite).
+    d.read_info().map_err(|e| format!("JPEG: {e}"))?;
+    let max = *xsurf_core::limits::IMAGE_SIDE_PX.end();
+    if let Some(i) = d.info().filter(|i| u32::from(i.width) > max || u32::from(i.height) > max) {
+        return Err(format!("JPEG: {}x{} is larger than {max} pixels a side", i.width, i.height));
+    }
+    d.set_max_decoding_buffer_size(max as usize * max as usize * 3);
     let pixels = d.decode().map_err(|e| format!("JPEG: {e}"))?;
     let info = d.info().ok_or("JPEG: no frame header")?;
     let (w, h) = (u32::from(info.width), u32::from(info.height));
