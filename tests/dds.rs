@@ -389,3 +389,84 @@ fn sim_time_from_clock_and_logs_on_rosout() {
     assert_eq!(end["level"], 20, "INFO");
     assert_eq!(s["exit"], 0, "{s}");
 }
+
+/// A `bag record` killed with SIGKILL mid-scan leaves a bag without metadata.yaml whose storage
+/// file ends inside a chunk. `bag info` and `reconstruct` read it up to the cut: every message
+/// the independent `mcap` reader finds in the complete chunks, in the same order and bytes
+/// (ours also keeps the whole messages of the cut chunk). `bag reindex` then writes its
+/// metadata.yaml (issue 24, item 4).
+#[test]
+fn a_killed_recorder_leaves_a_bag_read_up_to_the_cut() {
+    let out = scratch("record-kill");
+    let rec = out.join("rec");
+    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
+    let run = Command::new(root().join("../shared/tools/netns-run"))
+        .arg(root().join("tests/record_kill.sh"))
+        .arg(bin_dir)
+        .arg(pyramid_bag())
+        .arg(&rec)
+        .arg(out.join("logs"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let log = |f: &str| std::fs::read_to_string(out.join("logs").join(f)).unwrap_or_default();
+    // Play exits 0; the recorder dies by SIGKILL (128 + 9).
+    assert!(stdout.contains("exits 0 137"), "{stdout}\nrecord:\n{}\nplay:\n{}", log("record.log"), log("play.log"));
+    assert!(!rec.join("metadata.yaml").exists(), "a killed recorder wrote no metadata.yaml");
+
+    // Ours, message by message, up to the cut.
+    let bag = xsurf_formats::bag::Bag::open(&rec).unwrap();
+    let mut ours: Vec<(String, Vec<u8>)> = Vec::new();
+    let mut cut = None;
+    for m in bag.messages() {
+        match m {
+            Ok(m) => ours.push((m.topic, m.data)),
+            Err(e) => cut = Some(e.to_string()),
+        }
+    }
+    let cut = cut.expect("the storage file ends inside a record");
+    assert!(cut.contains("rec_0.mcap") && cut.contains("byte offset"), "{cut}");
+    let count = |topic: &str| ours.iter().filter(|(t, _)| t == topic).count();
+    let src = xsurf_formats::bag::Bag::open(pyramid_bag()).unwrap().metadata;
+    let src_images = src.topics.iter().find(|t| t.name == "/cam1/image_raw").unwrap().message_count as usize;
+    let images = count("/cam1/image_raw");
+    assert!(images > src_images / 10 && images < src_images * 9 / 10, "{images} of {src_images} images: not mid-scan");
+
+    // The independent reader: the same messages, as far as the last complete chunk.
+    if let Some(j) = checker("mcap_counts.py", &[std::path::Path::new("--damaged"), &rec.join("rec_0.mcap")]) {
+        let file = &j["files"][0];
+        assert!(file["damage"].is_string(), "{j}");
+        let theirs = file["count"].as_u64().unwrap() as usize;
+        assert!(theirs > 0 && theirs <= ours.len(), "mcap read {theirs}, we read {}", ours.len());
+        for (topic, t) in j["topics"].as_object().unwrap() {
+            assert!(t["count"].as_u64().unwrap() as usize <= count(topic), "{topic}: {t}");
+        }
+    }
+
+    // bag info reads it, says how, and counts what it holds.
+    let info = xsurf(&["bag", "info", rec.to_str().unwrap()]);
+    let text = format!("{}{}", String::from_utf8_lossy(&info.stdout), String::from_utf8_lossy(&info.stderr));
+    assert!(info.status.success(), "{text}");
+    assert!(text.contains("no metadata.yaml") && text.contains("counted up to there"), "{text}");
+    assert!(text.contains(&format!("Messages:          {}", ours.len())), "{text}");
+
+    // The scan up to the kill is reconstructed from it.
+    let o = out.join("o");
+    let r = xsurf(&["reconstruct", rec.to_str().unwrap(), "--out", o.to_str().unwrap()]);
+    // Exit 3: the files are written and the cut is named.
+    assert_clean_failure(&r, 3, "reconstructed up to the cut: ");
+    assert_clean_failure(&r, 3, "rec_0.mcap: MCAP error at byte offset");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(o.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["frames_read"]["cam1"].as_u64().unwrap() as usize, images, "{report}");
+    for f in ["cam1.ply", "cam2.ply", "merged.ply"] {
+        assert!(std::fs::metadata(o.join(f)).unwrap().len() > 1000, "{f}");
+    }
+
+    // reindex writes the metadata.yaml, with the counts read.
+    let ri = xsurf(&["bag", "reindex", rec.to_str().unwrap()]);
+    assert!(ri.status.success(), "{}", String::from_utf8_lossy(&ri.stderr));
+    let meta = xsurf_formats::bag::Bag::open(&rec).unwrap().metadata;
+    assert_eq!(meta.message_count as usize, ours.len());
+    assert_eq!(meta.topics.iter().find(|t| t.name == "/cam1/image_raw").unwrap().message_count as usize, images);
+    std::fs::remove_dir_all(&out).unwrap();
+}
