@@ -470,3 +470,44 @@ fn a_killed_recorder_leaves_a_bag_read_up_to_the_cut() {
     assert_eq!(meta.topics.iter().find(|t| t.name == "/cam1/image_raw").unwrap().message_count as usize, images);
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+/// A disk that fills up while `bag record` writes (a 4 MB tmpfs, the scan is about 12 MB raw):
+/// the recorder stops with an error naming the file, the cause and how many messages it wrote,
+/// and the bag is read up to its last complete chunk (issue 24, item 4).
+#[test]
+fn a_full_disk_stops_the_recorder_clearly_and_the_bag_is_kept() {
+    let out = scratch("record-full");
+    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
+    let run = Command::new(root().join("../shared/tools/netns-run"))
+        .arg("bash")
+        .arg(root().join("tests/full_disk.sh"))
+        .arg("4000000")
+        .arg(out.join("mnt"))
+        .arg(out.join("kept"))
+        .arg("bash")
+        .arg(root().join("tests/record_play.sh"))
+        .arg(bin_dir)
+        .arg(pyramid_bag())
+        .arg(out.join("mnt/rec"))
+        .arg(out.join("logs"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let log = std::fs::read_to_string(out.join("logs/record.log")).unwrap_or_default();
+    // Play exits 0, the recorder 1.
+    assert!(stdout.contains("exits 0 1"), "{stdout}\n{log}");
+    assert!(!log.contains("panicked"), "{log}");
+    assert!(log.contains("rec_0.mcap: cannot write") && log.contains("No space left on device"), "{log}");
+    let said: usize = log
+        .split("recording stopped after ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no count in {log}"));
+    let rec = out.join("kept/rec");
+    let read = xsurf_formats::bag::Bag::open(&rec).unwrap().messages().take_while(Result::is_ok).count();
+    assert!(read > 0 && read <= said, "read {read}, the recorder wrote {said}");
+    let info = xsurf(&["bag", "info", rec.to_str().unwrap()]);
+    assert!(info.status.success(), "{}", String::from_utf8_lossy(&info.stderr));
+    std::fs::remove_dir_all(&out).unwrap();
+}

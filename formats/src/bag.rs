@@ -35,6 +35,15 @@ pub enum BagError {
         /// What is wrong.
         reason: String,
     },
+    /// The MCAP file could not be written (a full disk, say); what was written before the
+    /// last complete chunk stays readable.
+    #[error("{path}: cannot write: {reason}")]
+    McapWrite {
+        /// The MCAP file.
+        path: PathBuf,
+        /// What went wrong, with its cause.
+        reason: String,
+    },
     /// A message names a topic that was not added.
     #[error("topic {0} was not added to the bag")]
     UnknownTopic(String),
@@ -139,6 +148,17 @@ fn mcap_err(path: &Path, offset: u64, e: impl std::fmt::Display) -> BagError {
     BagError::Mcap { path: path.to_path_buf(), offset, reason: e.to_string() }
 }
 
+/// A failed write, with the causes the mcap crate wraps ("I/O error from writing": which one).
+fn write_err(path: &Path, e: &mcap::McapError) -> BagError {
+    let mut reason = e.to_string();
+    let mut source = std::error::Error::source(e);
+    while let Some(s) = source {
+        reason.push_str(&format!(": {s}"));
+        source = s.source();
+    }
+    BagError::McapWrite { path: path.to_path_buf(), reason }
+}
+
 impl BagWriter {
     /// Creates the bag directory (which must not exist or be empty) and its MCAP file.
     pub fn create(dir: &Path, options: BagOptions) -> Result<Self, BagError> {
@@ -163,7 +183,7 @@ impl BagWriter {
             .profile("ros2")
             .library("xsurf")
             .compression(options.zstd.then_some(mcap::Compression::Zstd));
-        let mcap = opts.create(std::io::BufWriter::new(file)).map_err(|e| mcap_err(&path, 0, e))?;
+        let mcap = opts.create(std::io::BufWriter::new(file)).map_err(|e| write_err(&path, &e))?;
         Ok(Self {
             dir: dir.to_path_buf(),
             file_name,
@@ -189,7 +209,7 @@ impl BagWriter {
                 let id = self
                     .mcap
                     .add_schema(type_name, "ros2msg", definition.as_bytes())
-                    .map_err(|e| mcap_err(&path, 0, e))?;
+                    .map_err(|e| write_err(&path, &e))?;
                 self.schemas.insert(type_name.to_string(), id);
                 id
             }
@@ -197,7 +217,7 @@ impl BagWriter {
         let qos = qos.to_yaml_string();
         let mut meta = BTreeMap::new();
         meta.insert("offered_qos_profiles".to_string(), qos.clone());
-        let channel = self.mcap.add_channel(schema, name, "cdr", &meta).map_err(|e| mcap_err(&path, 0, e))?;
+        let channel = self.mcap.add_channel(schema, name, "cdr", &meta).map_err(|e| write_err(&path, &e))?;
         self.by_name.insert(name.to_string(), self.topics.len());
         self.topics.push(TopicRecord { name: name.into(), type_name: type_name.into(), qos, channel, count: 0 });
         Ok(())
@@ -213,7 +233,7 @@ impl BagWriter {
             log_time: log_time_ns,
             publish_time: publish_time_ns,
         };
-        self.mcap.write_to_known_channel(&header, data).map_err(|e| mcap_err(&self.dir.join(&self.file_name), 0, e))?;
+        self.mcap.write_to_known_channel(&header, data).map_err(|e| write_err(&self.dir.join(&self.file_name), &e))?;
         t.count += 1;
         self.count += 1;
         self.start_ns = Some(self.start_ns.map_or(log_time_ns, |s| s.min(log_time_ns)));
@@ -224,7 +244,7 @@ impl BagWriter {
     /// Finishes the MCAP file and writes `metadata.yaml` (atomically). Returns the metadata.
     pub fn finish(mut self) -> Result<BagMetadata, BagError> {
         let path = self.dir.join(&self.file_name);
-        self.mcap.finish().map_err(|e| mcap_err(&path, 0, e))?;
+        self.mcap.finish().map_err(|e| write_err(&path, &e))?;
         let start = self.start_ns.unwrap_or(0);
         let meta = BagMetadata {
             version: 8,

@@ -51,6 +51,9 @@ pub struct NodeReport {
     pub counters: BTreeMap<String, u64>,
     /// The last message it refused, and why.
     pub last_error: Option<String>,
+    /// Failures not about one message (files it could not write), the most recent last.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub problems: Vec<String>,
 }
 
 /// What `report.json` holds.
@@ -521,6 +524,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             seconds: n.busy_ns as f64 * 1e-9,
             counters,
             last_error: n.last_error.clone(),
+            problems: n.component.problems(),
         });
     }
     if let Some(e) = xray_error {
@@ -587,10 +591,8 @@ impl Report {
         }
         for n in &self.nodes {
             if let Some(&k) = n.counters.get("write_errors").filter(|&&k| k > 0) {
-                v.push(format!(
-                    "{}: {k} file(s) could not be written (the refined rig, surfaces; see the log)",
-                    n.node
-                ));
+                let last = n.problems.last().map_or_else(|| "see the log".to_string(), |p| format!("last: {p}"));
+                v.push(format!("{}: {k} file(s) could not be written ({last})", n.node));
             }
         }
         v

@@ -46,6 +46,15 @@ fn bag_qos(c: QosClass) -> Qos {
     }
 }
 
+/// What a recording that failed leaves behind.
+fn stopped(dir: &Path, written: u64) -> String {
+    format!(
+        "recording stopped after {written} messages; {} holds them up to its last complete chunk \
+         (`xsurf bag info` reads it, `xsurf bag reindex` writes its metadata.yaml)",
+        dir.display()
+    )
+}
+
 /// Records until stopped; returns the number of messages written.
 pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
     if !opts.all && opts.topics.is_empty() {
@@ -95,7 +104,7 @@ pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
                     .duration_since(std::time::UNIX_EPOCH)
                     .map_or(0, |d| d.as_nanos() as u64);
                 let data = m.encode()?;
-                writer.write(&subscribed[i], now, now, &data)?;
+                writer.write(&subscribed[i], now, now, &data).with_context(|| stopped(dir, written))?;
                 written += 1;
             }
             Err(RecvTimeoutError::Timeout) => {}
@@ -105,7 +114,7 @@ pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
     // Messages already received are written before the bag is closed.
     while let Ok((i, m)) = rx.try_recv() {
         let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
-        writer.write(&subscribed[i], now, now, &m.encode()?)?;
+        writer.write(&subscribed[i], now, now, &m.encode()?).with_context(|| stopped(dir, written))?;
         written += 1;
     }
     for (t, d) in &drops {
@@ -119,7 +128,7 @@ pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
             log::warn!("{t}: never discovered; not recorded");
         }
     }
-    writer.finish()?;
+    writer.finish().with_context(|| stopped(dir, written))?;
     stop.store(true, Ordering::SeqCst);
     Ok(written)
 }

@@ -210,4 +210,9 @@ pub trait Component: Send {
     fn counters(&self) -> Vec<(&'static str, u64)> {
         Vec::new()
     }
+    /// Failures that are not about one message (a file it could not write, and why), the most
+    /// recent last, for reports.
+    fn problems(&self) -> Vec<String> {
+        Vec::new()
+    }
 }

@@ -256,6 +256,8 @@ pub struct MergerNode {
     bad_overlays: u64,
     /// Files (surfaces, refinement.json, the rig) that could not be written.
     write_errors: u64,
+    /// The last few of those failures, with the file and the reason.
+    problems: Vec<String>,
     fused_dropped: u64,
     refinements: u64,
     refinements_refused: u64,
@@ -287,6 +289,7 @@ impl MergerNode {
             merged_current: false,
             bad_overlays: 0,
             write_errors: 0,
+            problems: Vec::new(),
             fused_dropped: 0,
             refinements: 0,
             refinements_refused: 0,
@@ -501,11 +504,18 @@ impl MergerNode {
         })();
         match result {
             Ok(()) => log::info!("merger: refined placement saved to {}", path.display()),
-            Err(e) => {
-                self.write_errors += 1;
-                log::error!("merger: save_rig_file {}: {e:#}", path.display());
-            }
+            Err(e) => self.write_failed(format!("save_rig_file {}: {e:#}", path.display())),
         }
+    }
+
+    /// Counts, logs and keeps (the last 8) a file that could not be written.
+    fn write_failed(&mut self, why: String) {
+        self.write_errors += 1;
+        log::error!("merger: {why}");
+        if self.problems.len() == 8 {
+            self.problems.remove(0);
+        }
+        self.problems.push(why);
     }
 
     fn write(&mut self, scan_id: u32, merged: &Mesh, meshes: &[(String, Mesh)], refinement: &[serde_json::Value]) {
@@ -513,8 +523,7 @@ impl MergerNode {
             let dir = dir.join(format!("scan_{scan_id}"));
             let plane = self.overlays.get(&scan_id);
             if let Err(e) = write_files(&dir, merged, meshes, plane, self.cfg.transparency) {
-                self.write_errors += 1;
-                log::error!("merger: cannot write files in {}: {e}", dir.display());
+                self.write_failed(format!("cannot write files in {}: {e}", dir.display()));
             }
             if !refinement.is_empty() {
                 let path = dir.join("refinement.json");
@@ -522,8 +531,7 @@ impl MergerNode {
                     serde_json::to_string_pretty(&serde_json::json!({ "scan_id": scan_id, "cameras": refinement }))
                         .unwrap_or_default();
                 if let Err(e) = xsurf_formats::write_bytes_atomic(&path, text.as_bytes()) {
-                    self.write_errors += 1;
-                    log::error!("merger: cannot write {}: {e}", path.display());
+                    self.write_failed(format!("cannot write {}: {e}", path.display()));
                 }
             }
         }
@@ -750,6 +758,9 @@ impl Component for MergerNode {
     /// Bulk work: the live host runs it behind the frame path.
     fn bulk(&self) -> bool {
         true
+    }
+    fn problems(&self) -> Vec<String> {
+        self.problems.clone()
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
         vec![
