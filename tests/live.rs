@@ -82,7 +82,8 @@ fn live_graph_composed_then_separate_processes() {
 }
 
 /// A node that dies (here: a merger given a parameter it refuses, so it exits 2 at start-up) is
-/// reported, the other nodes are stopped, and the launcher exits 1.
+/// reported, the other nodes are stopped, and the launcher exits 1; `respawn` does not restart a
+/// node whose parameters are refused.
 #[test]
 fn a_node_that_dies_stops_the_launch() {
     let netns = root().join("../shared/tools/netns-run");
@@ -90,7 +91,7 @@ fn a_node_that_dies_stops_the_launch() {
     let launch = dir.join("dies.launch.yaml");
     std::fs::write(
         &launch,
-        "launch:\n- node: {exec: edge_detector, namespace: cam1}\n- node: {exec: merger, param: [{name: merge_delay_s, value: -5.0}]}\n",
+        "launch:\n- node: {exec: edge_detector, namespace: cam1}\n- node: {exec: merger, respawn: true, param: [{name: merge_delay_s, value: -5.0}]}\n",
     )
     .unwrap();
     let xsurf = env!("CARGO_BIN_EXE_xsurf");
@@ -100,7 +101,60 @@ fn a_node_that_dies_stops_the_launch() {
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(err.contains("/merger") && err.contains("exited unexpectedly"), "{err}");
+    // Even with respawn: exit 2 (a refused parameter) is not mended by a restart.
+    assert!(err.contains("/merger exited with exit status: 2") && err.contains("not respawned"), "{err}");
     assert!(err.contains("merge_delay_s"), "the node's own reason is shown: {err}");
     assert!(!err.contains("did not stop"), "the others stopped on SIGTERM: {err}");
+}
+
+/// A node with `respawn: true` that exits is started again after `respawn_delay`, as often as it
+/// exits, while the others keep running; SIGTERM then stops all and nothing is respawned.
+/// (The nodes here are shell scripts: this tests the supervision, without DDS.)
+#[test]
+fn a_node_with_respawn_is_started_again() {
+    let dir = scratch("launch-respawn");
+    let script = |name: &str, body: &str| {
+        let p = dir.join(name);
+        std::fs::write(&p, format!("#!/bin/sh\ntrap 'exit 0' TERM\n{body}\n")).unwrap();
+        Command::new("chmod").arg("+x").arg(&p).status().unwrap();
+        p
+    };
+    // Three short lives, then a long one (so that SIGTERM meets a node that is running).
+    let count = dir.join("lives");
+    let blink = script(
+        "blink.sh",
+        &format!(
+            "echo x >> {c}\nif [ $(wc -l < {c}) -le 3 ]; then sleep 0.2; else sleep 30 & wait; fi",
+            c = count.display()
+        ),
+    );
+    let steady = script("steady.sh", "sleep 30 & wait");
+    let launch = dir.join("respawn.launch.yaml");
+    std::fs::write(
+        &launch,
+        format!(
+            "launch:\n- node: {{exec: {}, name: blink, namespace: cam1, respawn: true, respawn_delay: 0.3}}\n- node: {{exec: {}, name: steady}}\n",
+            blink.display(),
+            steady.display()
+        ),
+    )
+    .unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_xsurf"))
+        .args(["launch", launch.to_str().unwrap()])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(3000));
+    Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
+    let mut err = String::new();
+    std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(0), "{err}");
+    let respawns = err.matches("[launch] /cam1/blink exited with exit status: 0; respawning in 0.3 s").count();
+    assert_eq!(respawns, 3, "{err}");
+    assert!(err.contains("(respawn 3)"), "{err}");
+    assert_eq!(err.matches("started /cam1/blink").count(), 4, "{err}");
+    assert_eq!(err.matches("started /steady").count(), 1, "{err}");
+    assert!(!err.contains("exited unexpectedly") && !err.contains("did not stop"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -2,15 +2,19 @@
 //!
 //! Reads the actions `arg` (overridden by `NAME:=VALUE` on the command line), `let`, `node`
 //! (`exec`, `pkg` ignored, `name`, `namespace`, `param` values and `from` files, `remap`,
-//! `args`, `ros_args`), `include` (with `arg`), `group` and `push_ros_namespace` (also spelt
+//! `args`, `ros_args`, `respawn`, `respawn_delay`), `include` (with `arg`), `group` and `push_ros_namespace` (also spelt
 //! `push-ros-namespace`), with the substitutions `$(var NAME)`, `$(env NAME [DEFAULT])` and
 //! `$(dirname)`. Anything else is an error naming the file and the action.
 //!
 //! Separate mode starts one process per node (the executable beside `xsurf`, else on PATH),
-//! prefixes their output with the node's name, and supervises them: a node that exits is
-//! reported, the others are stopped, and the launcher exits 1. SIGINT/SIGTERM stop every node
-//! (SIGTERM, then SIGKILL after 10 s) and the launcher exits 0 when they all left cleanly.
-//! `--composed` hosts every node in one `xsurf compose` process.
+//! prefixes their output with the node's name, and supervises them: a node with `respawn: true`
+//! that exits (crashed, killed) is reported and started again after `respawn_delay` seconds, as
+//! `ros2 launch` does, unless it exits 2 (its command line or parameters refused, which a restart
+//! cannot mend); any other node that exits is reported, the others are stopped, and the
+//! launcher exits 1. SIGINT/SIGTERM stop every node (SIGTERM, then SIGKILL after 10 s; nothing is
+//! respawned then) and the launcher exits 0 when they all left cleanly. `--composed` hosts every
+//! node in one `xsurf compose` process, which is respawned (with the longest delay asked) if any
+//! node asks for it.
 
 use anyhow::{anyhow, bail, Context};
 use serde_yaml::Value;
@@ -42,6 +46,8 @@ pub struct NodeSpec {
     pub args: Vec<String>,
     /// Extra ROS arguments.
     pub ros_args: Vec<String>,
+    /// Start the node again when it exits (`respawn`), after `respawn_delay` seconds.
+    pub respawn: Option<Duration>,
 }
 
 impl NodeSpec {
@@ -240,7 +246,29 @@ fn node(body: &Value, scope: &Scope) -> anyhow::Result<NodeSpec> {
         remaps: Vec::new(),
         args: Vec::new(),
         ros_args: Vec::new(),
+        respawn: None,
     };
+    let respawn = match field(body, "respawn") {
+        None => false,
+        Some(v) => match text(v, "respawn", scope)?.as_str() {
+            "true" | "True" => true,
+            "false" | "False" => false,
+            other => bail!("respawn: {other:?} is not true or false"),
+        },
+    };
+    let delay = match field(body, "respawn_delay") {
+        None => 0.0,
+        Some(v) => {
+            let t = text(v, "respawn_delay", scope)?;
+            t.parse::<f64>()
+                .ok()
+                .filter(|d| d.is_finite() && (0.0..=3600.0).contains(d))
+                .ok_or_else(|| anyhow!("respawn_delay: {t:?} is not a number of seconds in [0, 3600]"))?
+        }
+    };
+    if respawn {
+        spec.respawn = Some(Duration::from_secs_f64(delay));
+    }
     for p in field(body, "param").and_then(Value::as_sequence).into_iter().flatten() {
         if let Some(f) = field(p, "from") {
             let f = PathBuf::from(text(f, "param from", scope)?);
@@ -303,10 +331,33 @@ fn executable(exec: &str) -> PathBuf {
     PathBuf::from(exec)
 }
 
+/// The command that starts node `n` as its own process.
+fn node_command(n: &NodeSpec, inline: Option<&Path>) -> Command {
+    let mut cmd = Command::new(executable(&n.exec));
+    cmd.args(&n.args).arg("--ros-args");
+    cmd.args(["-r".to_string(), format!("__node:={}", n.name), "-r".into(), format!("__ns:={}", n.namespace)]);
+    for f in &n.param_files {
+        cmd.arg("--params-file").arg(f);
+    }
+    if let Some(f) = inline {
+        cmd.arg("--params-file").arg(f);
+    }
+    for (from, to) in &n.remaps {
+        cmd.args(["-r".to_string(), format!("{from}:={to}")]);
+    }
+    cmd.args(&n.ros_args);
+    cmd
+}
+
 struct Running {
     label: String,
     child: Child,
     status: Option<std::process::ExitStatus>,
+    /// How to start it again, and after how long, for a node with `respawn`.
+    respawn: Option<(Duration, Box<dyn Fn() -> Command>)>,
+    /// When it is to be started again.
+    restart_at: Option<Instant>,
+    restarts: u32,
 }
 
 fn spawn(label: &str, mut cmd: Command) -> anyhow::Result<Running> {
@@ -327,7 +378,7 @@ fn spawn(label: &str, mut cmd: Command) -> anyhow::Result<Running> {
         });
     }
     eprintln!("[launch] started {label} (pid {})", child.id());
-    Ok(Running { label: label.to_string(), child, status: None })
+    Ok(Running { label: label.to_string(), child, status: None, respawn: None, restart_at: None, restarts: 0 })
 }
 
 fn terminate(r: &Running) {
@@ -375,26 +426,28 @@ pub fn run(nodes: &[NodeSpec], composed: bool) -> anyhow::Result<ExitCode> {
         if let Some(f) = &inline {
             ros.extend(["--params-file".into(), f.to_string_lossy().into_owned()]);
         }
-        let mut cmd = Command::new(std::env::current_exe()?);
-        cmd.args(args).args(ros);
-        running.push(spawn("xsurf compose", cmd)?);
+        let exe = std::env::current_exe()?;
+        let command = move || {
+            let mut cmd = Command::new(&exe);
+            cmd.args(&args).args(&ros);
+            cmd
+        };
+        let mut r = spawn("xsurf compose", command())?;
+        // Composed, the one process hosts every node: it is started again if any node asks.
+        r.respawn =
+            nodes.iter().filter_map(|n| n.respawn).max().map(|d| (d, Box::new(command) as Box<dyn Fn() -> Command>));
+        running.push(r);
     } else {
         for n in nodes {
-            let mut cmd = Command::new(executable(&n.exec));
-            cmd.args(&n.args).arg("--ros-args");
-            cmd.args(["-r".to_string(), format!("__node:={}", n.name), "-r".into(), format!("__ns:={}", n.namespace)]);
-            for f in &n.param_files {
-                cmd.arg("--params-file").arg(f);
-            }
-            if let Some(f) = &inline {
-                cmd.arg("--params-file").arg(f);
-            }
-            for (from, to) in &n.remaps {
-                cmd.args(["-r".to_string(), format!("{from}:={to}")]);
-            }
-            cmd.args(&n.ros_args);
-            match spawn(&n.fq_name(), cmd) {
-                Ok(r) => running.push(r),
+            let command = {
+                let (n, inline) = (n.clone(), inline.clone());
+                move || node_command(&n, inline.as_deref())
+            };
+            match spawn(&n.fq_name(), command()) {
+                Ok(mut r) => {
+                    r.respawn = n.respawn.map(|d| (d, Box::new(command) as Box<dyn Fn() -> Command>));
+                    running.push(r);
+                }
                 Err(e) => {
                     running.iter().for_each(terminate);
                     return Err(e);
@@ -408,15 +461,54 @@ pub fn run(nodes: &[NodeSpec], composed: bool) -> anyhow::Result<ExitCode> {
         for r in running.iter_mut().filter(|r| r.status.is_none()) {
             if let Ok(Some(s)) = r.child.try_wait() {
                 r.status = Some(s);
-                if stopping_since.is_none() {
-                    eprintln!("[launch] {} exited unexpectedly with {s}; stopping the others", r.label);
-                    failed = true;
-                } else if !s.success() {
-                    eprintln!("[launch] {} exited with {s}", r.label);
+                // Exit 2 is a refused command line or parameter: starting again cannot help.
+                let refused = s.code() == Some(2);
+                match (&r.respawn, stopping_since) {
+                    (Some(_), None) if refused => {
+                        eprintln!(
+                            "[launch] {} exited with {s} (its command line or parameters are refused): not respawned; stopping the others",
+                            r.label
+                        );
+                        failed = true;
+                    }
+                    (Some((delay, _)), None) => {
+                        eprintln!(
+                            "[launch] {} exited with {s}; respawning in {:.1} s (respawn {})",
+                            r.label,
+                            delay.as_secs_f64(),
+                            r.restarts + 1
+                        );
+                        r.restart_at = Some(Instant::now() + *delay);
+                    }
+                    (None, None) => {
+                        eprintln!("[launch] {} exited unexpectedly with {s}; stopping the others", r.label);
+                        failed = true;
+                    }
+                    (_, Some(_)) if !s.success() => eprintln!("[launch] {} exited with {s}", r.label),
+                    _ => {}
                 }
             }
         }
-        if running.iter().all(|r| r.status.is_some()) {
+        if stopping_since.is_none() {
+            for r in running.iter_mut().filter(|r| r.restart_at.is_some_and(|t| Instant::now() >= t)) {
+                r.restart_at = None;
+                let Some((_, command)) = &r.respawn else { continue };
+                match spawn(&r.label, command()) {
+                    Ok(new) => {
+                        r.child = new.child;
+                        r.status = None;
+                        r.restarts += 1;
+                    }
+                    Err(e) => {
+                        eprintln!("[launch] {e:#}; stopping the others");
+                        failed = true;
+                    }
+                }
+            }
+        } else {
+            running.iter_mut().for_each(|r| r.restart_at = None);
+        }
+        if running.iter().all(|r| r.status.is_some() && r.restart_at.is_none()) {
             break;
         }
         if stopping_since.is_none() && (failed || stop.load(Ordering::SeqCst)) {
@@ -468,14 +560,17 @@ mod tests {
   - node: {exec: edge_detector, remap: [{from: image_raw, to: image}]}
   - node: {exec: /opt/bin/triangulator, name: tri, namespace: sub}
 - include: {file: inner.launch.yaml, arg: [{name: who, value: m2}]}
-- node: {exec: mesher}
+- node: {exec: mesher, respawn: "true", respawn_delay: 2.5}
+- node: {exec: merger, respawn: false}
 "#,
         )
         .unwrap();
         let cli = BTreeMap::from([("speed".to_string(), "0.14".to_string())]);
         let nodes = load(&dir.join("main.launch.yaml"), &cli).unwrap();
         let names: Vec<String> = nodes.iter().map(NodeSpec::fq_name).collect();
-        assert_eq!(names, ["/c_arm_pose", "/cam1/edge_detector", "/cam1/sub/tri", "/m2", "/mesher"]);
+        assert_eq!(names, ["/c_arm_pose", "/cam1/edge_detector", "/cam1/sub/tri", "/m2", "/mesher", "/merger"]);
+        assert_eq!(nodes[4].respawn, Some(Duration::from_millis(2500)));
+        assert_eq!((nodes[0].respawn, nodes[5].respawn), (None, None));
         assert_eq!(nodes[0].param_files, [dir.join("p.yaml")]);
         assert_eq!(nodes[0].params[0], ("speed".to_string(), serde_yaml::from_str::<Value>("0.14").unwrap()));
         assert!(matches!(nodes[0].params[1].1, Value::Sequence(_)));
@@ -492,6 +587,8 @@ mod tests {
         bad("launch:\n- arg: {name: x}\n", "give x:=VALUE");
         bad("launch:\n- node: {exec: merger, name: $(find-pkg-share xsurf)}\n", "find-pkg-share");
         bad("nodes: []\n", "top-level `launch:`");
+        bad("launch:\n- node: {exec: merger, respawn: maybe}\n", "respawn: \"maybe\" is not true or false");
+        bad("launch:\n- node: {exec: merger, respawn: true, respawn_delay: -1}\n", "respawn_delay: \"-1\"");
         bad("launch:\n- node: {exec: merger, param: [{from: /no/such.yaml}]}\n", "/no/such.yaml does not exist");
         std::fs::remove_dir_all(&dir).unwrap();
     }
