@@ -218,7 +218,8 @@ fn cdr_target(type_name: &'static str) -> fn(&[u8], &Path, &mut Nodes) -> Outcom
         "visualization_msgs/msg/Marker",
         "xsurf_msgs/msg/ScanEvent",
         "sensor_msgs/msg/JointState",
-        "rosgraph_msgs/msg/Clock"
+        "rosgraph_msgs/msg/Clock",
+        "std_msgs/msg/String"
     )
 }
 
@@ -235,6 +236,7 @@ fn cdr_name(type_name: &str) -> &'static str {
         "xsurf_msgs/msg/ScanEvent" => "cdr_scan_event",
         "sensor_msgs/msg/JointState" => "cdr_joint_state",
         "rosgraph_msgs/msg/Clock" => "cdr_clock",
+        "std_msgs/msg/String" => "cdr_scan_report",
         other => panic!("no CDR target for {other}"),
     }
 }
@@ -841,6 +843,10 @@ fn write_seed_corpus() {
     put("cdr_joint_state", "carm.cdr", &enc(&Msg::JointState(Arc::new(js))));
     let clock = xsurf_msgs::rosgraph_msgs::Clock { clock: xsurf_msgs::builtin_interfaces::Time { sec: 5, nanosec: 7 } };
     put("cdr_clock", "clock.cdr", &enc(&Msg::Clock(Arc::new(clock))));
+    // A mesher's scan report (JSON in a std_msgs/String), as the merger takes it.
+    let report = r#"{"scan_id":0,"camera":"cam1","aborted":false,"frames_expected":80,"frames_received":71,"frames_lost":9,"frames_without_line":4,"profiles_refused":0,"gaps":[{"after":"1700000000.634578400","before":"1700000000.833038799","frames":5}]}"#;
+    let text = xsurf_msgs::std_msgs::StringMsg { data: report.into() };
+    put("cdr_scan_report", "mesher.cdr", &enc(&Msg::Text(Arc::new(text))));
 
     // A small bag (one camera: camera_info, two images, tf, events), plain and zstd.
     for (name, zstd) in [("plain.mcap", false), ("zstd.mcap", true)] {

@@ -957,3 +957,65 @@ fn a_full_disk_is_a_clear_error_and_complete_files_are_kept() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Frames dropped on purpose (cam1's images 20 to 24 of the scan, and 2 before any other) are
+/// accounted for exactly in the scan report: frames expected from the stamps, received, lost,
+/// and the gaps with the stamps either side; cam2, untouched, loses none. The merger names cam1
+/// as incomplete (issue 24, item 2).
+#[test]
+fn dropped_frames_are_counted_and_their_gaps_timed_in_the_scan_report() {
+    let dir = scratch("scan-report");
+    let b = dir.join("b");
+    let mut stamps: Vec<i64> = Vec::new();
+    let mut k = 0usize;
+    rewrite(pyramid_bag(), &b, &[], |m| {
+        if m.topic != "/cam1/image_raw" {
+            return vec![m];
+        }
+        let Msg::Image(i) = Msg::decode(&m.type_name, &m.data).unwrap() else { panic!() };
+        stamps.push(i.header.stamp.nanos());
+        k += 1;
+        if (21..=25).contains(&k) || k == 40 || k == 41 {
+            vec![]
+        } else {
+            vec![m]
+        }
+    });
+    let out = reconstruct(&b, &dir.join("o"));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("o/report.json")).unwrap()).unwrap();
+    let scan = &report["scan_reports"][0];
+    assert_eq!(scan["incomplete"], serde_json::json!(["cam1"]), "{scan}");
+    assert_eq!(scan["missing"], serde_json::json!([]), "{scan}");
+    let cam = |c: &str| scan["cameras"].as_array().unwrap().iter().find(|r| r["camera"] == c).unwrap().clone();
+    let (c1, c2) = (cam("cam1"), cam("cam2"));
+    let n = stamps.len() as u64;
+    let t = |i: usize| {
+        let s = stamps[i];
+        format!("{}.{:09}", s.div_euclid(1_000_000_000), s.rem_euclid(1_000_000_000))
+    };
+    // Images 1..=78 of which 21..=25 and 40, 41 are gone (0-based 20..=24, 39, 40).
+    assert_eq!(c1["frames_received"], n - 7, "{c1}");
+    assert_eq!(c1["frames_lost"], 7, "{c1}");
+    assert_eq!(c1["frames_expected"], n, "{c1}");
+    let gaps = c1["gaps"].as_array().unwrap();
+    assert_eq!(gaps.len(), 2, "{c1}");
+    assert_eq!(
+        (gaps[0]["after"].as_str().unwrap(), gaps[0]["before"].as_str().unwrap()),
+        (t(19).as_str(), t(25).as_str())
+    );
+    assert_eq!(gaps[0]["frames"], 5);
+    assert_eq!(
+        (gaps[1]["after"].as_str().unwrap(), gaps[1]["before"].as_str().unwrap()),
+        (t(38).as_str(), t(41).as_str())
+    );
+    assert_eq!(gaps[1]["frames"], 2);
+    assert_eq!((c2["frames_received"].as_u64(), c2["frames_lost"].as_u64()), (Some(n), Some(0)), "{c2}");
+    // The counts agree with the frames the bag holds, by an independent reader.
+    if let Some(j) = checker("mcap_counts.py", &[&b.join("b_0.mcap")]) {
+        assert_eq!(j["topics"]["/cam1/image_raw"]["count"].as_u64(), c1["frames_received"].as_u64(), "{j}");
+    }
+    assert!(err.contains("merger: scan 1: cam1 lost 7 of 78 frames (gaps: 5 after"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

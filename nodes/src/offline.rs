@@ -103,6 +103,9 @@ pub struct Report {
     pub files: Vec<String>,
     /// The radiograph: placed, or why not (`None` without `--xray`).
     pub xray: Option<String>,
+    /// Per scan, each camera's frames: expected from the stamps, received, lost (with the gaps'
+    /// times), without a line, refused; and the cameras missing from the merge.
+    pub scan_reports: Vec<serde_json::Value>,
 }
 
 /// Peak resident set size of this process (Linux), bytes.
@@ -166,6 +169,7 @@ const OUTPUT_FILES: &[&str] = &[
     "xray.json",
     "surface.dcm",
     "refinement.json",
+    "scan_report.json",
     "report.json",
 ];
 
@@ -400,10 +404,22 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
         peak_rss_bytes: None,
         truncated: None,
         undecodable: BTreeMap::new(),
-        unused_topics: meta.topics.iter().filter(|t| !router.has_subscriber(&t.name)).map(|t| t.name.clone()).collect(),
+        unused_topics: meta
+            .topics
+            .iter()
+            .filter(|t| {
+                !router.has_subscriber(&t.name)
+                    || router
+                        .output_topics()
+                        .iter()
+                        .any(|(o, p)| *o == t.name && !xsurf_runtime::router::is_shared(o, p.type_name))
+            })
+            .map(|t| t.name.clone())
+            .collect(),
         nodes: Vec::new(),
         files: Vec::new(),
         xray: None,
+        scan_reports: Vec::new(),
     };
     let total_images: u64 = cameras
         .iter()
@@ -420,6 +436,15 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     let mut last_report = Instant::now();
     let t_read = Instant::now();
     let mut read_s = 0.0;
+    // What the graph computes itself is not taken from the bag (a bag recorded from a live
+    // graph holds its clouds, meshes and scan reports too).
+    // (Shared topics, /tf and the scan events, come from outside even where a node publishes.)
+    let computed: std::collections::BTreeSet<String> = router
+        .output_topics()
+        .into_iter()
+        .filter(|(t, p)| !xsurf_runtime::router::is_shared(t, p.type_name))
+        .map(|(t, _)| t)
+        .collect();
     for m in bag.messages() {
         let m = match m {
             Ok(m) => m,
@@ -430,7 +455,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             }
         };
         report.messages_read += 1;
-        if !router.has_subscriber(&m.topic) {
+        if !router.has_subscriber(&m.topic) || computed.contains(&m.topic) {
             continue;
         }
         let t_dec = Instant::now();
@@ -547,6 +572,13 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
         .collect();
     scan_dirs.sort();
     report.scans = scan_dirs.iter().map(|s| s.0).collect();
+    // Each scan's account of its frames (the merger's scan_report.json), in report.json too.
+    for (_, dir) in &scan_dirs {
+        if let Some(v) = std::fs::read(dir.join("scan_report.json")).ok().and_then(|b| serde_json::from_slice(&b).ok())
+        {
+            report.scan_reports.push(v);
+        }
+    }
     if scan_dirs.len() == 1 {
         let dir = &scan_dirs[0].1;
         for e in std::fs::read_dir(dir)?.filter_map(|e| e.ok()) {

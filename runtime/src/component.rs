@@ -5,8 +5,8 @@ use crate::params::{ParamDecl, ParamError, Params};
 use std::sync::Arc;
 use xsurf_msgs::{
     cdr, rosgraph_msgs::Clock, sensor_msgs::CameraInfo, sensor_msgs::CompressedImage, sensor_msgs::Image,
-    sensor_msgs::JointState, sensor_msgs::PointCloud2, tf2_msgs::TFMessage, visualization_msgs::Marker,
-    xsurf_msgs::LaserLine, xsurf_msgs::ScanEvent, RosMessage,
+    sensor_msgs::JointState, sensor_msgs::PointCloud2, std_msgs::StringMsg, tf2_msgs::TFMessage,
+    visualization_msgs::Marker, xsurf_msgs::LaserLine, xsurf_msgs::ScanEvent, RosMessage,
 };
 
 /// A message on a topic; shared so that fan-out copies nothing.
@@ -32,6 +32,8 @@ pub enum Msg {
     JointState(Arc<JointState>),
     /// `rosgraph_msgs/msg/Clock`.
     Clock(Arc<Clock>),
+    /// `std_msgs/msg/String` (the scan reports on `/scan/report`, JSON).
+    Text(Arc<StringMsg>),
 }
 
 /// Why bytes could not become a [`Msg`].
@@ -80,7 +82,7 @@ macro_rules! msg_types {
             pub fn stamp_ns(&self) -> Option<i64> {
                 match self {
                     Msg::Tf(m) => m.transforms.first().map(|t| t.header.stamp.nanos()),
-                    Msg::Clock(_) => None,
+                    Msg::Clock(_) | Msg::Text(_) => None,
                     Msg::Image(m) => Some(m.header.stamp.nanos()),
                     Msg::CompressedImage(m) => Some(m.header.stamp.nanos()),
                     Msg::CameraInfo(m) => Some(m.header.stamp.nanos()),
@@ -108,6 +110,7 @@ msg_types! {
     ScanEvent => ScanEvent,
     JointState => JointState,
     Clock => Clock,
+    Text => StringMsg,
 }
 
 /// Quality of service by topic class (each overridable by the `qos.<class>.*` parameters of

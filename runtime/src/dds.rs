@@ -26,8 +26,8 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use xsurf_msgs::{
     rosgraph_msgs::Clock, sensor_msgs::CameraInfo, sensor_msgs::CompressedImage, sensor_msgs::Image,
-    sensor_msgs::JointState, sensor_msgs::PointCloud2, tf2_msgs::TFMessage, visualization_msgs::Marker,
-    xsurf_msgs::LaserLine, xsurf_msgs::ScanEvent,
+    sensor_msgs::JointState, sensor_msgs::PointCloud2, std_msgs::StringMsg, tf2_msgs::TFMessage,
+    visualization_msgs::Marker, xsurf_msgs::LaserLine, xsurf_msgs::ScanEvent,
 };
 
 /// Messages waiting for the component, at most.
@@ -171,6 +171,7 @@ enum Pub {
     ScanEvent(ros2_client::Publisher<ScanEvent>),
     JointState(ros2_client::Publisher<JointState>),
     Clock(ros2_client::Publisher<Clock>),
+    Text(ros2_client::Publisher<StringMsg>),
 }
 
 impl Pub {
@@ -187,6 +188,7 @@ impl Pub {
             Pub::ScanEvent(p) => p.gid(),
             Pub::JointState(p) => p.gid(),
             Pub::Clock(p) => p.gid(),
+            Pub::Text(p) => p.gid(),
         }
     }
     fn publish(&self, m: &Msg) -> Result<(), String> {
@@ -203,6 +205,7 @@ impl Pub {
             (Pub::ScanEvent(p), Msg::ScanEvent(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
             (Pub::JointState(p), Msg::JointState(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
             (Pub::Clock(p), Msg::Clock(m)) => p.publish(**m).map_err(|e| format!("{e:?}")),
+            (Pub::Text(p), Msg::Text(m)) => p.publish(m.as_ref().clone()).map_err(|e| format!("{e:?}")),
             (_, m) => Err(format!("a {} does not fit this publisher", m.type_name())),
         }
     }
@@ -247,6 +250,7 @@ impl DdsNode {
             "xsurf_msgs/msg/ScanEvent" => Pub::ScanEvent(self.node.create_publisher(&t, q).map_err(err)?),
             "sensor_msgs/msg/JointState" => Pub::JointState(self.node.create_publisher(&t, q).map_err(err)?),
             "rosgraph_msgs/msg/Clock" => Pub::Clock(self.node.create_publisher(&t, q).map_err(err)?),
+            "std_msgs/msg/String" => Pub::Text(self.node.create_publisher(&t, q).map_err(err)?),
             other => return Err(HostError::Dds(format!("no publisher for type {other}"))),
         };
         Ok(p)
@@ -340,6 +344,7 @@ fn subscribe(
             spawn_reader!(JointState, |m| Event::Message(index, Msg::JointState(Arc::new(m))))
         }
         "rosgraph_msgs/msg/Clock" => spawn_reader!(Clock, |m: Clock| Event::Clock(m.clock.nanos())),
+        "std_msgs/msg/String" => spawn_reader!(StringMsg, |m| Event::Message(index, Msg::Text(Arc::new(m)))),
         other => return Err(HostError::Dds(format!("no subscription for type {other}"))),
     }
     Ok(())

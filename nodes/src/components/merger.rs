@@ -36,6 +36,7 @@ use xsurf_core::zipper::zipper;
 use xsurf_formats::scene::{Scene, Surface, TexturedPlane};
 use xsurf_msgs::pointcloud;
 use xsurf_msgs::sensor_msgs::{CameraInfo, PointCloud2};
+use xsurf_msgs::std_msgs::StringMsg;
 use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
@@ -244,6 +245,8 @@ pub struct MergerNode {
     camera_sizes: BTreeMap<usize, (u32, u32)>,
     /// The current scan's START stamp: an older cloud is a late one of an earlier scan.
     scan_start_ns: Option<i64>,
+    /// The meshers' reports of the current scan (`/scan/report`), by camera.
+    reports: BTreeMap<String, serde_json::Value>,
     scan_id: u32,
     pending_deadline: Option<i64>,
     merges: u64,
@@ -278,6 +281,7 @@ impl MergerNode {
             clouds: BTreeMap::new(),
             camera_sizes: BTreeMap::new(),
             scan_start_ns: None,
+            reports: BTreeMap::new(),
             scan_id: 0,
             pending_deadline: None,
             merges: 0,
@@ -333,6 +337,7 @@ impl MergerNode {
         let grids: Vec<(String, Grid)> =
             self.clouds.iter().map(|(&i, (_, g))| (self.cfg.cameras[i].clone(), g.clone())).collect();
         let (names, mut gs): (Vec<String>, Vec<Grid>) = grids.into_iter().unzip();
+        let gs_names = names.clone();
         let (refined, refinement) = self.refine(&names, &mut gs);
         if !refined.is_empty() {
             let placements = TFMessage {
@@ -392,7 +397,8 @@ impl MergerNode {
         out.publish(0, cloud.clone());
         out.publish(1, marker.clone());
         self.last_outputs.set(vec![(0, cloud), (1, marker)]);
-        self.write(self.scan_id, &merged, &meshes, &refinement);
+        let scan_report = self.scan_report(&gs_names);
+        self.write(self.scan_id, &merged, &meshes, &refinement, Some(&scan_report));
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
             self.scan_id,
@@ -518,8 +524,65 @@ impl MergerNode {
         self.problems.push(why);
     }
 
-    fn write(&mut self, scan_id: u32, merged: &Mesh, meshes: &[(String, Mesh)], refinement: &[serde_json::Value]) {
-        if let Some(dir) = &self.cfg.output_dir {
+    /// The scan's account: each camera's report from its mesher, the cameras whose surface is
+    /// missing from the merge (no cloud) and those that lost frames; the last two are logged.
+    fn scan_report(&self, merged: &[String]) -> serde_json::Value {
+        let missing: Vec<&String> = self.cfg.cameras.iter().filter(|c| !merged.contains(c)).collect();
+        for c in &missing {
+            log::warn!("merger: scan {}: no surface from {c}: merged without it", self.scan_id);
+        }
+        let mut incomplete = Vec::new();
+        for c in merged {
+            match self.reports.get(c) {
+                Some(r) if r["frames_lost"].as_u64().unwrap_or(0) > 0 => {
+                    let gaps: Vec<String> = r["gaps"]
+                        .as_array()
+                        .into_iter()
+                        .flatten()
+                        .map(|g| format!("{} after {}", g["frames"], g["after"].as_str().unwrap_or("?")))
+                        .collect();
+                    log::warn!(
+                        "merger: scan {}: {c} lost {} of {} frames (gaps: {})",
+                        self.scan_id,
+                        r["frames_lost"],
+                        r["frames_expected"],
+                        if gaps.is_empty() { "at the ends".to_string() } else { gaps.join(", ") }
+                    );
+                    incomplete.push(c.clone());
+                }
+                Some(_) => {}
+                None => log::warn!("merger: scan {}: no report from {c}'s mesher", self.scan_id),
+            }
+        }
+        serde_json::json!({
+            "scan_id": self.scan_id,
+            "merged": merged,
+            "missing": missing,
+            "incomplete": incomplete,
+            "cameras": self.cfg.cameras.iter().filter_map(|c| self.reports.get(c)).collect::<Vec<_>>(),
+        })
+    }
+
+    fn write(
+        &mut self,
+        scan_id: u32,
+        merged: &Mesh,
+        meshes: &[(String, Mesh)],
+        refinement: &[serde_json::Value],
+        scan_report: Option<&serde_json::Value>,
+    ) {
+        if let Some(dir) = self.cfg.output_dir.clone() {
+            let dir = &dir;
+            if let Some(report) = scan_report {
+                let path = dir.join(format!("scan_{scan_id}")).join("scan_report.json");
+                let text = serde_json::to_string_pretty(report).unwrap_or_default();
+                if let Err(e) = std::fs::create_dir_all(path.parent().unwrap_or(dir))
+                    .map_err(|e| e.to_string())
+                    .and_then(|_| xsurf_formats::write_bytes_atomic(&path, text.as_bytes()).map_err(|e| e.to_string()))
+                {
+                    self.write_failed(format!("cannot write {}: {e}", path.display()));
+                }
+            }
             let dir = dir.join(format!("scan_{scan_id}"));
             let plane = self.overlays.get(&scan_id);
             if let Err(e) = write_files(&dir, merged, meshes, plane, self.cfg.transparency) {
@@ -550,7 +613,7 @@ impl MergerNode {
         if let Some((id, merged, meshes)) = self.last_merge.take() {
             if id == scan_id {
                 log::info!("merger: scan {scan_id}: radiograph arrived after the merge; scene files rewritten");
-                self.write(scan_id, &merged, &meshes, &[]);
+                self.write(scan_id, &merged, &meshes, &[], None);
             }
             self.last_merge = Some((id, merged, meshes));
         }
@@ -650,6 +713,7 @@ impl Component for MergerNode {
                 .iter()
                 .map(|c| Port::new(&format!("/{c}/camera_info"), CameraInfo::TYPE_NAME, QosClass::Sensor)),
         );
+        v.push(Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable));
         v
     }
     fn outputs(&self) -> Vec<Port> {
@@ -679,6 +743,16 @@ impl Component for MergerNode {
                 self.merged_current = false;
                 Ok(())
             }
+            (i, Msg::Text(t)) if i == 2 * n + 4 => {
+                let r: serde_json::Value = serde_json::from_str(&t.data)
+                    .map_err(|e| NodeError::new(format!("/scan/report: not JSON: {e}")))?;
+                let cam = r["camera"].as_str().unwrap_or("").to_string();
+                // A report of another scan, or of no camera of ours, is not this merge's.
+                if r["scan_id"].as_u64() == Some(u64::from(self.scan_id)) && self.cfg.cameras.contains(&cam) {
+                    self.reports.insert(cam, r);
+                }
+                Ok(())
+            }
             (i, Msg::CameraInfo(info)) if (n + 4..2 * n + 4).contains(&i) => {
                 let (w, h) = (info.width, info.height);
                 if !xsurf_core::limits::image_side_ok(w) || !xsurf_core::limits::image_side_ok(h) {
@@ -701,6 +775,7 @@ impl Component for MergerNode {
                         self.motion = None;
                         self.scan_id = e.scan_id;
                         self.scan_start_ns = Some(e.header.stamp.nanos());
+                        self.reports.clear();
                     }
                     ScanEvent::END => {
                         self.scan_id = e.scan_id;

@@ -14,6 +14,7 @@ use xsurf_core::edge::Orientation;
 use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
 use xsurf_core::triangulate::Profile;
 use xsurf_msgs::sensor_msgs::{CameraInfo, PointCloud2};
+use xsurf_msgs::std_msgs::StringMsg;
 use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
@@ -146,6 +147,15 @@ struct GapDetector {
 }
 
 impl GapDetector {
+    /// The frame period: the median of the recent intervals, once there are three.
+    fn nominal_ns(&self) -> Option<i64> {
+        (self.recent.len() >= 3).then(|| {
+            let mut v = self.recent.clone();
+            v.sort_unstable();
+            v[v.len() / 2]
+        })
+    }
+
     /// Frames missing before a frame at `stamp_ns`.
     fn missing(&mut self, stamp_ns: i64, factor: f64) -> u32 {
         let Some(last) = self.last_ns.replace(stamp_ns) else { return 0 };
@@ -153,14 +163,7 @@ impl GapDetector {
         if dt <= 0 {
             return 0;
         }
-        let nominal = if self.recent.len() >= 3 {
-            let mut v = self.recent.clone();
-            v.sort_unstable();
-            Some(v[v.len() / 2])
-        } else {
-            None
-        };
-        match nominal {
+        match self.nominal_ns() {
             Some(n) if dt as f64 > factor * n as f64 => {
                 ((dt as f64 / n as f64).round() as u32).saturating_sub(1).max(1)
             }
@@ -172,6 +175,54 @@ impl GapDetector {
                 0
             }
         }
+    }
+}
+
+/// One scan's frames as the mesher saw them, for its report on `/scan/report`.
+#[derive(Debug, Default, Clone)]
+struct ScanAccount {
+    /// The START event's stamp (none for a scan without events).
+    start_ns: Option<i64>,
+    first_ns: Option<i64>,
+    last_ns: Option<i64>,
+    received: u64,
+    without_line: u64,
+    refused: u64,
+    /// `(stamp before, stamp after, frames missing between)`.
+    gaps: Vec<(i64, i64, u32)>,
+}
+
+impl ScanAccount {
+    /// The report of a scan that ended at `end_ns` (its END or ABORT), with `period_ns` the
+    /// frame period. Frames are counted as lost between two frames whose stamps are further
+    /// apart than the period allows (the gaps). Before the first frame and after the last, the
+    /// stamps cannot tell a lost frame from a camera not yet (or no longer) exposing, so the
+    /// margins to START and END are given in seconds and not counted.
+    fn report(&self, scan_id: u32, camera: &str, aborted: bool, end_ns: Option<i64>, period_ns: Option<i64>) -> String {
+        let lost: u64 = self.gaps.iter().map(|g| u64::from(g.2)).sum();
+        let margin = |a: Option<i64>, b: Option<i64>| a.zip(b).map(|(a, b)| (b - a) as f64 * 1e-9);
+        let t = |ns: Option<i64>| ns.map(convert::fmt_stamp);
+        serde_json::json!({
+            "scan_id": scan_id,
+            "camera": camera,
+            "aborted": aborted,
+            "start": t(self.start_ns),
+            "end": t(end_ns),
+            "first_frame": t(self.first_ns),
+            "last_frame": t(self.last_ns),
+            "frame_period_s": period_ns.map(|p| p as f64 * 1e-9),
+            "frames_expected": self.received + lost,
+            "frames_received": self.received,
+            "frames_lost": lost,
+            "first_frame_after_start_s": margin(self.start_ns, self.first_ns),
+            "last_frame_before_end_s": margin(self.last_ns, end_ns),
+            "frames_without_line": self.without_line,
+            "profiles_refused": self.refused,
+            "gaps": self.gaps.iter().map(|g| serde_json::json!({
+                "after": convert::fmt_stamp(g.0), "before": convert::fmt_stamp(g.1), "frames": g.2,
+            })).collect::<Vec<_>>(),
+        })
+        .to_string()
     }
 }
 
@@ -200,6 +251,8 @@ pub struct MesherNode {
     samples: Option<usize>,
     /// Profiles refused for a size the camera does not give.
     bad_profiles: u64,
+    /// The scan's frames, for its report.
+    account: ScanAccount,
 }
 
 const IN_PROFILE: usize = 0;
@@ -207,6 +260,7 @@ const IN_EVENTS: usize = 1;
 const IN_INFO: usize = 2;
 const OUT_CLOUD: usize = 0;
 const OUT_MESH: usize = 1;
+const OUT_REPORT: usize = 2;
 /// Longest run of empty columns inserted for a stamp gap.
 const MAX_GAP_COLUMNS: u32 = 300;
 
@@ -233,10 +287,12 @@ impl MesherNode {
             outside_scan: 0,
             samples: None,
             bad_profiles: 0,
+            account: ScanAccount::default(),
         })
     }
 
-    fn start(&mut self, scan_id: u32) {
+    fn start(&mut self, scan_id: u32, start_ns: Option<i64>) {
+        self.account = ScanAccount { start_ns, ..ScanAccount::default() };
         self.scan_id = scan_id;
         self.active = true;
         self.grid = Grid::default();
@@ -248,6 +304,7 @@ impl MesherNode {
         // The grid's size comes from the camera, not from whichever profile arrives first.
         if let Some(n) = self.samples.filter(|&n| n != p.points.len()) {
             self.bad_profiles += 1;
+            self.account.refused += 1;
             return Err(NodeError::new(format!(
                 "profile has {} samples; the camera (camera_info, {} line) gives {n}",
                 p.points.len(),
@@ -257,7 +314,11 @@ impl MesherNode {
         if self.grid.frames() == 0 {
             self.grid = Grid::new(p.points.len());
         }
+        let before = self.gaps.last_ns;
         let missing = self.gaps.missing(stamp, self.cfg.gap_factor);
+        if let Some(b) = before.filter(|_| missing > 0) {
+            self.account.gaps.push((b, stamp, missing));
+        }
         if missing > 0 {
             self.dropped_frames += u64::from(missing);
             log::warn!("{}: {missing} frame(s) missing before {} (stamp gap)", self.camera, convert::fmt_stamp(stamp));
@@ -276,13 +337,20 @@ impl MesherNode {
             NodeError::new(format!("profile has {n} samples, this scan's grid has {}", self.grid.samples()))
         })?;
         self.frames += 1;
+        let a = &mut self.account;
+        a.received += 1;
+        a.without_line += u64::from(p.valid() == 0);
+        a.first_ns = Some(a.first_ns.map_or(stamp, |f| f.min(stamp)));
+        a.last_ns = Some(a.last_ns.map_or(stamp, |l| l.max(stamp)));
         Ok(())
     }
 
-    fn close(&mut self, aborted: bool, out: &mut Outbox) {
+    fn close(&mut self, aborted: bool, end_ns: Option<i64>, out: &mut Outbox) {
         if !self.active {
             return;
         }
+        let report = self.account.report(self.scan_id, &self.camera, aborted, end_ns, self.gaps.nominal_ns());
+        out.publish(OUT_REPORT, Msg::Text(Arc::new(StringMsg { data: report })));
         self.active = false;
         self.scans += 1;
         let stamp = self.grid.stamps_ns().last().copied().unwrap_or(0);
@@ -346,6 +414,7 @@ impl Component for MesherNode {
         vec![
             Port::new("cloud", PointCloud2::TYPE_NAME, QosClass::Reliable),
             Port::new("mesh", Marker::TYPE_NAME, QosClass::Reliable),
+            Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
         ]
     }
     fn declarations(&self) -> Vec<ParamDecl> {
@@ -369,7 +438,7 @@ impl Component for MesherNode {
                         self.outside_scan += 1;
                         return Ok(());
                     }
-                    self.start(0);
+                    self.start(0, None);
                 }
                 let stamp = c.header.stamp.nanos();
                 self.push(stamp, &p)?;
@@ -386,12 +455,12 @@ impl Component for MesherNode {
                 self.events_seen = true;
                 match e.event {
                     ScanEvent::START => {
-                        self.close(false, out);
+                        self.close(false, None, out);
                         self.last_mesh.clear();
-                        self.start(e.scan_id);
+                        self.start(e.scan_id, Some(e.header.stamp.nanos()));
                     }
-                    ScanEvent::END if self.active => self.close(false, out),
-                    ScanEvent::ABORT if self.active => self.close(true, out),
+                    ScanEvent::END if self.active => self.close(false, Some(e.header.stamp.nanos()), out),
+                    ScanEvent::ABORT if self.active => self.close(true, Some(e.header.stamp.nanos()), out),
                     ScanEvent::END | ScanEvent::ABORT => {}
                     other => return Err(NodeError::new(format!("unknown scan event {other}"))),
                 }
@@ -420,7 +489,7 @@ impl Component for MesherNode {
         self.last_mesh.tick(self.cfg.republish_ns, now_ns, out);
     }
     fn finish(&mut self, out: &mut Outbox) {
-        self.close(false, out);
+        self.close(false, None, out);
     }
     /// Bulk work: the live host runs it behind the frame path.
     fn bulk(&self) -> bool {

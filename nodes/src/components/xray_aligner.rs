@@ -657,7 +657,9 @@ mod tests {
             };
             grid.push(i64::from(f), &p).unwrap();
         }
-        router.publish("/cam1/cloud", &Msg::Cloud(Arc::new(convert::grid_cloud(&grid, convert::header(0, "table")))));
+        // Stamped in the scan (its last frame): a cloud older than START is refused as stale.
+        let h = convert::header(1_900_000_000, "table");
+        router.publish("/cam1/cloud", &Msg::Cloud(Arc::new(convert::grid_cloud(&grid, h))));
         router.publish("/scan/events", &event(2_000_000_000, ScanEvent::END));
         router.tick(2_500_000_000);
         router.tick(3_100_000_000);
