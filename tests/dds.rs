@@ -511,3 +511,51 @@ fn a_full_disk_stops_the_recorder_clearly_and_the_bag_is_kept() {
     assert!(info.status.success(), "{}", String::from_utf8_lossy(&info.stderr));
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+/// `bag record --split-by-scan`, the always-on recorder of the launch file's example: the same
+/// scan played twice becomes two bags, `scan_1` and `scan_1_2`, each holding the whole scan
+/// (every image, its placement) and nothing between; each reconstructs on its own (issue 24,
+/// item 3).
+#[test]
+fn a_recorder_split_by_scan_writes_one_bag_per_scan() {
+    let out = scratch("record-split");
+    let rec = out.join("rec");
+    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
+    let run = Command::new(root().join("../shared/tools/netns-run"))
+        .env("PLAYS", "2")
+        .env("RECORD_ARGS", "--all --split-by-scan")
+        .arg(root().join("tests/record_play.sh"))
+        .arg(bin_dir)
+        .arg(pyramid_bag())
+        .arg(&rec)
+        .arg(out.join("logs"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let log = std::fs::read_to_string(out.join("logs/record.log")).unwrap_or_default();
+    assert!(stdout.contains("exits 0 0"), "{stdout}\n{log}");
+    let mut bags: Vec<String> =
+        std::fs::read_dir(&rec).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    bags.sort();
+    assert_eq!(bags, ["scan_1", "scan_1_2"], "{log}");
+    let src = xsurf_formats::bag::Bag::open(pyramid_bag()).unwrap().metadata;
+    let count =
+        |m: &xsurf_formats::bag::BagMetadata, t: &str| m.topics.iter().find(|x| x.name == t).map(|x| x.message_count);
+    for b in &bags {
+        let dir = rec.join(b);
+        let meta = xsurf_formats::bag::Bag::open(&dir).unwrap().metadata;
+        for t in ["/cam1/image_raw", "/cam2/image_raw", "/scan/events"] {
+            assert_eq!(count(&meta, t), count(&src, t), "{b} {t}\n{log}");
+        }
+        assert!(count(&meta, "/tf_static").is_some_and(|n| n >= 1), "{b}: the placement\n{log}");
+        // Nothing of the other play: no more tf than the scan's own and the last one before it.
+        assert!(count(&meta, "/tf") <= count(&src, "/tf").map(|n| n + 1), "{b}\n{log}");
+        let o = out.join(format!("o-{b}"));
+        let r = xsurf(&["reconstruct", dir.to_str().unwrap(), "--out", o.to_str().unwrap()]);
+        assert!(r.status.success(), "{b}: {}", String::from_utf8_lossy(&r.stderr));
+        let report: serde_json::Value = serde_json::from_slice(&std::fs::read(o.join("report.json")).unwrap()).unwrap();
+        assert_eq!(report["scans"], serde_json::json!([1]), "{report}");
+        assert_eq!(report["scan_reports"][0]["incomplete"], serde_json::json!([]), "{report}");
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}

@@ -162,3 +162,26 @@ fn rviz_config_shows_our_topics_in_the_table_frame() {
     }
     assert!(displays.iter().any(|d| d["Class"] == "rviz_default_plugins/TF"));
 }
+
+/// The launch file's commented example of an always-on recorder, uncommented, is a node that
+/// runs `xsurf bag record --split-by-scan` with respawn (its `--ros-args` are ignored by the
+/// recorder; `tests/dds.rs` tests the split itself).
+#[test]
+fn the_launch_file_example_recorder_parses_when_uncommented() {
+    let text = std::fs::read_to_string(root().join("launch-config/xsurf.launch.yaml")).unwrap();
+    let i = text.find("  # - node:").expect("the recorder example");
+    let block: Vec<String> = text[i..].lines().map(|l| l.replacen("  # ", "  ", 1)).collect();
+    let dir = scratch("launch-recorder");
+    let file = dir.join("rec.launch.yaml");
+    std::fs::write(&file, format!("launch:\n{}\n", block.join("\n"))).unwrap();
+    let nodes = xsurf_nodes::launch::load(&file, &Default::default()).unwrap();
+    assert_eq!(nodes.len(), 1);
+    let n = &nodes[0];
+    assert_eq!((n.exec.as_str(), n.fq_name().as_str()), ("xsurf", "/recorder"));
+    assert_eq!(&n.args[..3], ["bag", "record", "-o"]);
+    assert!(n.args.contains(&"--split-by-scan".to_string()) && n.respawn.is_some(), "{n:?}");
+    for t in ["/cam1/image_raw", "/cam2/camera_info", "/tf", "/tf_static", "/scan/events"] {
+        assert!(n.args.contains(&t.to_string()), "{t} not recorded: {n:?}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

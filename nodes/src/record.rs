@@ -23,6 +23,137 @@ pub struct RecordOptions {
     pub zstd: bool,
     /// Stop after this long (else on SIGINT/SIGTERM).
     pub duration_s: Option<f64>,
+    /// One bag per scan, `DIR/scan_<id>` (START to END or ABORT, from `/scan/events`), each
+    /// beginning with the last `/tf_static` and `/tf` heard before it; nothing is recorded
+    /// between scans.
+    pub split_by_scan: bool,
+}
+
+/// Where messages go: one bag, or one bag per scan.
+struct Sink {
+    dir: std::path::PathBuf,
+    options: BagOptions,
+    split: bool,
+    /// The bag being written (always, without `split`; during a scan, with it).
+    writer: Option<BagWriter>,
+    /// Every topic added so far: name, type, definition, QoS (each new bag gets them all).
+    topics: Vec<(String, String, String, Qos)>,
+    /// With `split`, the last `/tf_static` and `/tf` heard, written first into each scan's bag.
+    preroll: BTreeMap<String, Vec<u8>>,
+    /// With `split`, between scans: the last `GRACE_NS` of messages (arrival ns, topic, stamp,
+    /// CDR), so that a frame stamped after START that arrives before the START event (another
+    /// DDS reader) still goes into the scan's bag.
+    recent: std::collections::VecDeque<(u64, String, Option<i64>, Vec<u8>)>,
+    /// With `split`, after END: when the scan's bag is closed (frames stamped before END may
+    /// arrive after the event).
+    close_at: Option<u64>,
+}
+
+/// How long a scan's bag takes messages that arrive before START or after END, ns.
+const GRACE_NS: u64 = 1_000_000_000;
+
+impl Sink {
+    fn new(dir: &Path, options: BagOptions, split: bool) -> anyhow::Result<Sink> {
+        let writer = if split {
+            std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+            None
+        } else {
+            Some(BagWriter::create(dir, options)?)
+        };
+        Ok(Sink {
+            dir: dir.to_path_buf(),
+            options,
+            split,
+            writer,
+            topics: Vec::new(),
+            preroll: BTreeMap::new(),
+            recent: std::collections::VecDeque::new(),
+            close_at: None,
+        })
+    }
+
+    fn add_topic(&mut self, topic: &str, ty: &str, def: &str, qos: Qos) -> anyhow::Result<()> {
+        if let Some(w) = &mut self.writer {
+            w.add_topic(topic, ty, def, &qos)?;
+        }
+        self.topics.push((topic.into(), ty.into(), def.into(), qos));
+        Ok(())
+    }
+
+    /// Writes one message; with `split`, a scan event opens or closes the scan's bag.
+    fn write(&mut self, topic: &str, now: u64, m: &Msg) -> anyhow::Result<()> {
+        let data = m.encode()?;
+        if !self.split {
+            if let Some(w) = &mut self.writer {
+                w.write(topic, now, now, &data)?;
+            }
+            return Ok(());
+        }
+        let event = match m {
+            Msg::ScanEvent(e) if topic == "/scan/events" => Some((e.scan_id, e.event, e.header.stamp.nanos())),
+            _ => None,
+        };
+        self.tick(now)?;
+        if let Some((id, xsurf_msgs::xsurf_msgs::ScanEvent::START, start_ns)) = event {
+            self.close()?;
+            let mut dir = self.dir.join(format!("scan_{id}"));
+            let mut k = 2;
+            while dir.exists() {
+                dir = self.dir.join(format!("scan_{id}_{k}"));
+                k += 1;
+            }
+            let mut w = BagWriter::create(&dir, self.options)?;
+            for (t, ty, def, qos) in &self.topics {
+                w.add_topic(t, ty, def, qos)?;
+            }
+            for (t, d) in &self.preroll {
+                w.write(t, now, now, d)?;
+            }
+            // What arrived before the event but belongs to the scan.
+            for (at, t, stamp, d) in self.recent.drain(..) {
+                if stamp.is_some_and(|s| s >= start_ns) {
+                    w.write(&t, at, at, &d)?;
+                }
+            }
+            log::info!("scan {id}: recording into {}", dir.display());
+            self.writer = Some(w);
+        }
+        match &mut self.writer {
+            Some(w) => w.write(topic, now, now, &data)?,
+            None => {
+                self.recent.push_back((now, topic.to_string(), m.stamp_ns(), data.clone()));
+                while self.recent.front().is_some_and(|r| r.0 + GRACE_NS < now) {
+                    self.recent.pop_front();
+                }
+            }
+        }
+        if topic == "/tf_static" || topic == "/tf" {
+            self.preroll.insert(topic.to_string(), data);
+        }
+        if let Some((id, xsurf_msgs::xsurf_msgs::ScanEvent::END | xsurf_msgs::xsurf_msgs::ScanEvent::ABORT, _)) = event
+        {
+            self.close_at = Some(now + GRACE_NS);
+            log::info!("scan {id}: ended; its bag closes in 1 s");
+        }
+        Ok(())
+    }
+
+    /// Closes a scan's bag once its grace after END has passed.
+    fn tick(&mut self, now: u64) -> anyhow::Result<()> {
+        if self.close_at.is_some_and(|t| now >= t) {
+            self.close()?;
+        }
+        Ok(())
+    }
+
+    /// Finishes the bag being written.
+    fn close(&mut self) -> anyhow::Result<()> {
+        self.close_at = None;
+        if let Some(w) = self.writer.take() {
+            w.finish()?;
+        }
+        Ok(())
+    }
 }
 
 fn class_of(topic: &str, type_name: &str) -> QosClass {
@@ -63,7 +194,7 @@ pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
     let env = DdsEnv::from_env(|k| std::env::var(k).ok())?;
     let ctx = env.context()?;
     let mut node = dds::tool_node(&ctx, "xsurf_bag_recorder")?;
-    let mut writer = BagWriter::create(dir, BagOptions { zstd: opts.zstd })?;
+    let mut sink = Sink::new(dir, BagOptions { zstd: opts.zstd }, opts.split_by_scan)?;
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
@@ -73,6 +204,12 @@ pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
     let mut subscribed: Vec<String> = Vec::new();
     let mut drops = Vec::new();
     let mut wanted: BTreeMap<String, Option<String>> = opts.topics.iter().map(|t| (t.clone(), None)).collect();
+    if opts.split_by_scan {
+        // The scans are cut by their events, and each bag needs the frames' placement.
+        for t in ["/scan/events", "/tf", "/tf_static"] {
+            wanted.entry(t.to_string()).or_insert(None);
+        }
+    }
     let t0 = Instant::now();
     let mut last_discovery = None::<Instant>;
     let mut written = 0u64;
@@ -88,7 +225,7 @@ pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
                 }
                 let class = class_of(&topic, &ty);
                 let def = Msg::definition(&ty).context("definition")?;
-                writer.add_topic(&topic, &ty, &def, &bag_qos(class))?;
+                sink.add_topic(&topic, &ty, &def, bag_qos(class))?;
                 drops.push((
                     topic.clone(),
                     dds::subscribe_forward(&mut node, &topic, &ty, class, subscribed.len(), tx.clone(), stop.clone())?,
@@ -103,18 +240,22 @@ pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
                 let now = std::time::SystemTime::now()
                     .duration_since(std::time::UNIX_EPOCH)
                     .map_or(0, |d| d.as_nanos() as u64);
-                let data = m.encode()?;
-                writer.write(&subscribed[i], now, now, &data).with_context(|| stopped(dir, written))?;
+                sink.write(&subscribed[i], now, &m).with_context(|| stopped(dir, written))?;
                 written += 1;
             }
-            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Timeout) => {
+                let now = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0, |d| d.as_nanos() as u64);
+                sink.tick(now).with_context(|| stopped(dir, written))?;
+            }
             Err(RecvTimeoutError::Disconnected) => break,
         }
     }
     // Messages already received are written before the bag is closed.
     while let Ok((i, m)) = rx.try_recv() {
         let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
-        writer.write(&subscribed[i], now, now, &m.encode()?).with_context(|| stopped(dir, written))?;
+        sink.write(&subscribed[i], now, &m).with_context(|| stopped(dir, written))?;
         written += 1;
     }
     for (t, d) in &drops {
@@ -128,7 +269,7 @@ pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
             log::warn!("{t}: never discovered; not recorded");
         }
     }
-    writer.finish().with_context(|| stopped(dir, written))?;
+    sink.close().with_context(|| stopped(dir, written))?;
     stop.store(true, Ordering::SeqCst);
     Ok(written)
 }

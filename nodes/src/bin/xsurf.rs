@@ -6,7 +6,7 @@
 //! xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
 //! xsurf bag info DIR
 //! xsurf bag reindex DIR [--force]
-//! xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--duration S]
+//! xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--split-by-scan] [--duration S]
 //! xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
 //! xsurf param list NODE | get NODE NAME | set NODE NAME VALUE [--timeout S]
 //! xsurf calibrate synth|intrinsics|placement|laser ...
@@ -38,7 +38,7 @@ const USAGE: &str = "usage:
       summarize a bag, like `ros2 bag info`
   xsurf bag reindex DIR [--force]
       write the metadata.yaml of a bag folder that has none, from its .mcap files (as `ros2 bag reindex`)
-  xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--duration S]
+  xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--split-by-scan] [--duration S]
       record topics from DDS into a bag (QoS recorded per topic); stops on Ctrl-C or after S
   xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]
       publish a bag over DDS with its original timing (honours ROS_DOMAIN_ID, ROS_LOCALHOST_ONLY)
@@ -105,7 +105,10 @@ example: xsurf bag reindex /tmp/rec && xsurf bag info /tmp/rec"),
     ("bag record", "options:
   -o DIR             the bag folder to write          TOPIC... or --all   what to record
   --zstd             compress the chunks              --duration S        stop after S seconds
-example: xsurf bag record -o /tmp/rec /surface/cloud /surface/mesh /tf --duration 30"),
+  --split-by-scan    one bag per scan, DIR/scan_<id> (START to END, from /scan/events; each
+                     begins with the last /tf_static and /tf; nothing between scans)
+example: xsurf bag record -o /tmp/rec /surface/cloud /surface/mesh /tf --duration 30
+         xsurf bag record -o /data/scans --split-by-scan /cam1/image_raw /cam1/camera_info"),
     ("bag play", "options:
   --rate R           speed factor (default 1)         --loop              start again at the end
   --clock            publish /clock (for use_sim_time) --topics T1,T2     only these topics
@@ -537,12 +540,18 @@ fn cmd_demo(args: &[String]) -> anyhow::Result<()> {
 fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
     match args.first().map(String::as_str) {
         Some("record") => {
-            let a = Args::parse(&args[1..], &["--all", "--zstd"], &["-o", "--output", "--duration"])?;
+            // Started as a launch file's node, it is given `--ros-args ...` (its name and
+            // namespace): a recorder has no use for them.
+            let end = args.iter().position(|a| a == "--ros-args").unwrap_or(args.len());
+            let args = &args[..end];
+            let a =
+                Args::parse(&args[1..], &["--all", "--zstd", "--split-by-scan"], &["-o", "--output", "--duration"])?;
             let out = a.get("-o").or(a.get("--output")).ok_or_else(|| usage("bag record needs -o DIR"))?;
             let opts = xsurf_nodes::record::RecordOptions {
                 topics: a.positional.clone(),
                 all: a.has("--all"),
                 zstd: a.has("--zstd"),
+                split_by_scan: a.has("--split-by-scan"),
                 duration_s: a
                     .get("--duration")
                     .map(|d| d.parse())
