@@ -7,8 +7,17 @@
 
 mod common;
 use common::*;
+use std::path::Path;
 use std::process::Command;
 use xsurf_core::eval;
+
+/// The tests that run a DDS graph take their turns: two at once on a 2-core machine slow
+/// discovery past the tools' timeouts (a parameter call gave up after 15 s in CI).
+static ONE_GRAPH_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn one_graph_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    ONE_GRAPH_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}
 
 #[test]
 fn nodes_exchange_images_and_clouds_with_an_independent_dds_peer() {
@@ -21,6 +30,7 @@ fn composed_nodes_pass_messages_in_memory_and_still_publish_on_dds() {
 }
 
 fn graph(mode: &str, cam1_log: &str, exits: &str) {
+    let _turn = one_graph_at_a_time();
     let Some(py) = python() else { return };
     let netns = root().join("../shared/tools/netns-run");
     assert!(netns.is_file(), "{} is needed to keep DDS on this machine", netns.display());
@@ -239,20 +249,36 @@ fn record_then_play_round_trips_every_message() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
-fn record_and_play(src_bag: &std::path::Path, out: &std::path::Path) {
-    let netns = root().join("../shared/tools/netns-run");
-    assert!(netns.is_file());
-    let rec = out.join("rec");
-    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
-    let run = Command::new(&netns)
-        .arg(root().join("tests/record_play.sh"))
+/// Runs `tests/<script> BIN_DIR SRC_BAG REC_DIR OUT/logs` inside the network namespace, after
+/// `wrap` (a command the script runs under, such as `tests/full_disk.sh`), with `env` set;
+/// returns its stdout and the recorder's log.
+fn recording(
+    script: &str,
+    wrap: &[std::ffi::OsString],
+    env: &[(&str, &str)],
+    src: &Path,
+    rec: &Path,
+    out: &Path,
+) -> (String, String) {
+    let _turn = one_graph_at_a_time();
+    let bin_dir = Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
+    let run = Command::new(root().join("../shared/tools/netns-run"))
+        .envs(env.iter().copied())
+        .args(wrap)
+        .arg(root().join("tests").join(script))
         .arg(bin_dir)
-        .arg(src_bag)
-        .arg(&rec)
+        .arg(src)
+        .arg(rec)
         .arg(out.join("logs"))
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&run.stdout);
+    let log = std::fs::read_to_string(out.join("logs/record.log")).unwrap_or_default();
+    (String::from_utf8_lossy(&run.stdout).into_owned(), log)
+}
+
+fn record_and_play(src_bag: &std::path::Path, out: &std::path::Path) {
+    let rec = out.join("rec");
+    let (stdout, _) = recording("record_play.sh", &[], &[], src_bag, &rec, out);
     let log = |f: &str| std::fs::read_to_string(out.join("logs").join(f)).unwrap_or_default();
     assert!(stdout.contains("exits 0 0"), "{stdout}\nrecord:\n{}\nplay:\n{}", log("record.log"), log("play.log"));
     let by_topic = |dir: &std::path::Path| {
@@ -288,6 +314,7 @@ fn peer(
     bag: Option<&std::path::Path>,
 ) -> Option<(serde_json::Value, Vec<[f32; 3]>)> {
     let py = python()?;
+    let _turn = one_graph_at_a_time();
     let netns = root().join("../shared/tools/netns-run");
     let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
     let work = params.parent().unwrap().join("work");
@@ -371,6 +398,7 @@ fn frames_published_from_python_come_back_as_a_surface() {
 /// reach /rosout as rcl_interfaces/msg/Log.
 #[test]
 fn sim_time_from_clock_and_logs_on_rosout() {
+    let _turn = one_graph_at_a_time();
     let Some(py) = python() else { return };
     let netns = root().join("../shared/tools/netns-run");
     let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
@@ -399,16 +427,7 @@ fn sim_time_from_clock_and_logs_on_rosout() {
 fn a_killed_recorder_leaves_a_bag_read_up_to_the_cut() {
     let out = scratch("record-kill");
     let rec = out.join("rec");
-    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
-    let run = Command::new(root().join("../shared/tools/netns-run"))
-        .arg(root().join("tests/record_kill.sh"))
-        .arg(bin_dir)
-        .arg(pyramid_bag())
-        .arg(&rec)
-        .arg(out.join("logs"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&run.stdout);
+    let (stdout, _) = recording("record_kill.sh", &[], &[], pyramid_bag(), &rec, &out);
     let log = |f: &str| std::fs::read_to_string(out.join("logs").join(f)).unwrap_or_default();
     // Play exits 0; the recorder dies by SIGKILL (128 + 9).
     assert!(stdout.contains("exits 0 137"), "{stdout}\nrecord:\n{}\nplay:\n{}", log("record.log"), log("play.log"));
@@ -477,23 +496,16 @@ fn a_killed_recorder_leaves_a_bag_read_up_to_the_cut() {
 #[test]
 fn a_full_disk_stops_the_recorder_clearly_and_the_bag_is_kept() {
     let out = scratch("record-full");
-    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
-    let run = Command::new(root().join("../shared/tools/netns-run"))
-        .arg("bash")
-        .arg(root().join("tests/full_disk.sh"))
-        .arg("4000000")
-        .arg(out.join("mnt"))
-        .arg(out.join("kept"))
-        .arg("bash")
-        .arg(root().join("tests/record_play.sh"))
-        .arg(bin_dir)
-        .arg(pyramid_bag())
-        .arg(out.join("mnt/rec"))
-        .arg(out.join("logs"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    let log = std::fs::read_to_string(out.join("logs/record.log")).unwrap_or_default();
+    // The recording runs with its folder on a 4 MB tmpfs.
+    let wrap = [
+        "bash".into(),
+        root().join("tests/full_disk.sh").into_os_string(),
+        "4000000".into(),
+        out.join("mnt").into_os_string(),
+        out.join("kept").into_os_string(),
+        "bash".into(),
+    ];
+    let (stdout, log) = recording("record_play.sh", &wrap, &[], pyramid_bag(), &out.join("mnt/rec"), &out);
     // Play exits 0, the recorder 1.
     assert!(stdout.contains("exits 0 1"), "{stdout}\n{log}");
     assert!(!log.contains("panicked"), "{log}");
@@ -520,19 +532,8 @@ fn a_full_disk_stops_the_recorder_clearly_and_the_bag_is_kept() {
 fn a_recorder_split_by_scan_writes_one_bag_per_scan() {
     let out = scratch("record-split");
     let rec = out.join("rec");
-    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
-    let run = Command::new(root().join("../shared/tools/netns-run"))
-        .env("PLAYS", "2")
-        .env("RECORD_ARGS", "--all --split-by-scan")
-        .arg(root().join("tests/record_play.sh"))
-        .arg(bin_dir)
-        .arg(pyramid_bag())
-        .arg(&rec)
-        .arg(out.join("logs"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    let log = std::fs::read_to_string(out.join("logs/record.log")).unwrap_or_default();
+    let env = [("PLAYS", "2"), ("RECORD_ARGS", "--all --split-by-scan")];
+    let (stdout, log) = recording("record_play.sh", &[], &env, pyramid_bag(), &rec, &out);
     assert!(stdout.contains("exits 0 0"), "{stdout}\n{log}");
     let mut bags: Vec<String> =
         std::fs::read_dir(&rec).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();

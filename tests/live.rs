@@ -10,20 +10,24 @@ use common::*;
 use std::process::Command;
 use xsurf_core::eval;
 
+/// The live tests' params file (in `out`): 320x240 cameras at 15 fps, the C-arm at `speed`
+/// m/s after 4 s, files into `files`.
+fn live_params(out: &std::path::Path, files: &std::path::Path, speed: f64) -> std::path::PathBuf {
+    let params = out.join("params.yaml");
+    let text = format!(
+        "/**:\n  ros__parameters:\n    laser_plane: [0.0, 1.0, 0.0, 0.0]\n    output_dir: {}\n/**/camera_driver:\n  ros__parameters:\n    width: 320\n    height: 240\n    fps: 15.0\n/**/triangulator:\n  ros__parameters:\n    max_extrapolation_s: 0.012\n/c_arm_pose:\n  ros__parameters:\n    speed: {speed}\n    start_delay_s: 4.0\n/merger:\n  ros__parameters:\n    merge_delay_s: 1.0\n",
+        files.display()
+    );
+    std::fs::write(&params, text).unwrap();
+    params
+}
+
 fn live(mode: &str, seconds: u32) {
     let netns = root().join("../shared/tools/netns-run");
     assert!(netns.is_file(), "{} is needed to keep DDS on this machine", netns.display());
     let out = scratch(&format!("live-{mode}"));
     let files = out.join("files");
-    let params = out.join("params.yaml");
-    std::fs::write(
-        &params,
-        format!(
-            "/**:\n  ros__parameters:\n    laser_plane: [0.0, 1.0, 0.0, 0.0]\n    output_dir: {}\n/**/camera_driver:\n  ros__parameters:\n    width: 320\n    height: 240\n    fps: 15.0\n/**/triangulator:\n  ros__parameters:\n    max_extrapolation_s: 0.012\n/c_arm_pose:\n  ros__parameters:\n    speed: 0.07\n    start_delay_s: 4.0\n/merger:\n  ros__parameters:\n    merge_delay_s: 1.0\n",
-            files.display()
-        ),
-    )
-    .unwrap();
+    let params = live_params(&out, &files, 0.07);
     let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
     let run = Command::new(&netns)
         .arg(root().join("tests/live_graph.sh"))
@@ -169,15 +173,7 @@ fn a_killed_triangulator_is_respawned_and_the_scan_says_what_it_lost() {
     let netns = root().join("../shared/tools/netns-run");
     let out = scratch("kill-node");
     let files = out.join("files");
-    let params = out.join("params.yaml");
-    std::fs::write(
-        &params,
-        format!(
-            "/**:\n  ros__parameters:\n    laser_plane: [0.0, 1.0, 0.0, 0.0]\n    output_dir: {}\n/**/camera_driver:\n  ros__parameters:\n    width: 320\n    height: 240\n    fps: 15.0\n/**/triangulator:\n  ros__parameters:\n    max_extrapolation_s: 0.012\n/c_arm_pose:\n  ros__parameters:\n    speed: 0.035\n    start_delay_s: 4.0\n/merger:\n  ros__parameters:\n    merge_delay_s: 1.0\n",
-            files.display()
-        ),
-    )
-    .unwrap();
+    let params = live_params(&out, &files, 0.035);
     let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
     let run = Command::new(&netns)
         .arg(root().join("tests/kill_node.sh"))
