@@ -110,8 +110,13 @@ pub struct Report {
 
 /// Peak resident set size of this process (Linux), bytes.
 pub fn peak_rss_bytes() -> Option<u64> {
+    proc_status_bytes("VmHWM:")
+}
+
+/// A memory field of `/proc/self/status` (`VmRSS:`, `VmHWM:`, ...), bytes (Linux).
+pub fn proc_status_bytes(field: &str) -> Option<u64> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let line = s.lines().find(|l| l.starts_with(field))?;
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb * 1024)
 }
@@ -386,6 +391,15 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
         &ros.remaps,
     );
 
+    // What the graph computes itself is not taken from the bag (a bag recorded from a live
+    // graph holds its clouds, meshes and scan reports too).
+    // (Shared topics, /tf and the scan events, come from outside even where a node publishes.)
+    let computed: std::collections::BTreeSet<String> = router
+        .output_topics()
+        .into_iter()
+        .filter(|(t, p)| !xsurf_runtime::router::is_shared(t, p.type_name))
+        .map(|(t, _)| t)
+        .collect();
     let mut report = Report {
         bag: opts.bag.display().to_string(),
         cameras: cameras.clone(),
@@ -407,13 +421,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
         unused_topics: meta
             .topics
             .iter()
-            .filter(|t| {
-                !router.has_subscriber(&t.name)
-                    || router
-                        .output_topics()
-                        .iter()
-                        .any(|(o, p)| *o == t.name && !xsurf_runtime::router::is_shared(o, p.type_name))
-            })
+            .filter(|t| !router.has_subscriber(&t.name) || computed.contains(&t.name))
             .map(|t| t.name.clone())
             .collect(),
         nodes: Vec::new(),
@@ -436,15 +444,6 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     let mut last_report = Instant::now();
     let t_read = Instant::now();
     let mut read_s = 0.0;
-    // What the graph computes itself is not taken from the bag (a bag recorded from a live
-    // graph holds its clouds, meshes and scan reports too).
-    // (Shared topics, /tf and the scan events, come from outside even where a node publishes.)
-    let computed: std::collections::BTreeSet<String> = router
-        .output_topics()
-        .into_iter()
-        .filter(|(t, p)| !xsurf_runtime::router::is_shared(t, p.type_name))
-        .map(|(t, _)| t)
-        .collect();
     for m in bag.messages() {
         let m = match m {
             Ok(m) => m,

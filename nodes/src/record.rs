@@ -118,17 +118,17 @@ impl Sink {
             log::info!("scan {id}: recording into {}", dir.display());
             self.writer = Some(w);
         }
+        if topic == "/tf_static" || topic == "/tf" {
+            self.preroll.insert(topic.to_string(), data.clone());
+        }
         match &mut self.writer {
             Some(w) => w.write(topic, now, now, &data)?,
             None => {
-                self.recent.push_back((now, topic.to_string(), m.stamp_ns(), data.clone()));
+                self.recent.push_back((now, topic.to_string(), m.stamp_ns(), data));
                 while self.recent.front().is_some_and(|r| r.0 + GRACE_NS < now) {
                     self.recent.pop_front();
                 }
             }
-        }
-        if topic == "/tf_static" || topic == "/tf" {
-            self.preroll.insert(topic.to_string(), data);
         }
         if let Some((id, xsurf_msgs::xsurf_msgs::ScanEvent::END | xsurf_msgs::xsurf_msgs::ScanEvent::ABORT, _)) = event
         {
@@ -175,6 +175,11 @@ fn bag_qos(c: QosClass) -> Qos {
         QosClass::Reliable => Qos::RELIABLE,
         QosClass::Static => Qos::STATIC,
     }
+}
+
+/// The receive time of a message: now, ns since the epoch.
+fn now_ns() -> u64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
 }
 
 /// What a recording that failed leaves behind.
@@ -237,25 +242,18 @@ pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
         }
         match rx.recv_timeout(Duration::from_millis(100)) {
             Ok((i, m)) => {
-                let now = std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map_or(0, |d| d.as_nanos() as u64);
-                sink.write(&subscribed[i], now, &m).with_context(|| stopped(dir, written))?;
+                sink.write(&subscribed[i], now_ns(), &m).with_context(|| stopped(dir, written))?;
                 written += 1;
             }
             Err(RecvTimeoutError::Timeout) => {
-                let now = std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map_or(0, |d| d.as_nanos() as u64);
-                sink.tick(now).with_context(|| stopped(dir, written))?;
+                sink.tick(now_ns()).with_context(|| stopped(dir, written))?;
             }
             Err(RecvTimeoutError::Disconnected) => break,
         }
     }
     // Messages already received are written before the bag is closed.
     while let Ok((i, m)) = rx.try_recv() {
-        let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
-        sink.write(&subscribed[i], now, &m).with_context(|| stopped(dir, written))?;
+        sink.write(&subscribed[i], now_ns(), &m).with_context(|| stopped(dir, written))?;
         written += 1;
     }
     for (t, d) in &drops {

@@ -337,7 +337,7 @@ impl MergerNode {
         let grids: Vec<(String, Grid)> =
             self.clouds.iter().map(|(&i, (_, g))| (self.cfg.cameras[i].clone(), g.clone())).collect();
         let (names, mut gs): (Vec<String>, Vec<Grid>) = grids.into_iter().unzip();
-        let gs_names = names.clone();
+        let scan_report = self.scan_report(&names);
         let (refined, refinement) = self.refine(&names, &mut gs);
         if !refined.is_empty() {
             let placements = TFMessage {
@@ -397,7 +397,6 @@ impl MergerNode {
         out.publish(0, cloud.clone());
         out.publish(1, marker.clone());
         self.last_outputs.set(vec![(0, cloud), (1, marker)]);
-        let scan_report = self.scan_report(&gs_names);
         self.write(self.scan_id, &merged, &meshes, &refinement, Some(&scan_report));
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
@@ -571,32 +570,29 @@ impl MergerNode {
         refinement: &[serde_json::Value],
         scan_report: Option<&serde_json::Value>,
     ) {
-        if let Some(dir) = self.cfg.output_dir.clone() {
-            let dir = &dir;
-            if let Some(report) = scan_report {
-                let path = dir.join(format!("scan_{scan_id}")).join("scan_report.json");
-                let text = serde_json::to_string_pretty(report).unwrap_or_default();
-                if let Err(e) = std::fs::create_dir_all(path.parent().unwrap_or(dir))
-                    .map_err(|e| e.to_string())
-                    .and_then(|_| xsurf_formats::write_bytes_atomic(&path, text.as_bytes()).map_err(|e| e.to_string()))
-                {
-                    self.write_failed(format!("cannot write {}: {e}", path.display()));
-                }
-            }
-            let dir = dir.join(format!("scan_{scan_id}"));
-            let plane = self.overlays.get(&scan_id);
-            if let Err(e) = write_files(&dir, merged, meshes, plane, self.cfg.transparency) {
-                self.write_failed(format!("cannot write files in {}: {e}", dir.display()));
-            }
-            if !refinement.is_empty() {
-                let path = dir.join("refinement.json");
-                let text =
-                    serde_json::to_string_pretty(&serde_json::json!({ "scan_id": scan_id, "cameras": refinement }))
-                        .unwrap_or_default();
-                if let Err(e) = xsurf_formats::write_bytes_atomic(&path, text.as_bytes()) {
-                    self.write_failed(format!("cannot write {}: {e}", path.display()));
-                }
-            }
+        let Some(out) = self.cfg.output_dir.clone() else { return };
+        let dir = out.join(format!("scan_{scan_id}"));
+        if let Some(report) = scan_report {
+            self.write_json(&dir, "scan_report.json", report);
+        }
+        let plane = self.overlays.get(&scan_id);
+        if let Err(e) = write_files(&dir, merged, meshes, plane, self.cfg.transparency) {
+            self.write_failed(format!("cannot write files in {}: {e}", dir.display()));
+        }
+        if !refinement.is_empty() {
+            self.write_json(&dir, "refinement.json", &serde_json::json!({ "scan_id": scan_id, "cameras": refinement }));
+        }
+    }
+
+    /// Writes `value` as `dir/name` (atomically, `dir` made if need be); a failure is counted.
+    fn write_json(&mut self, dir: &std::path::Path, name: &str, value: &serde_json::Value) {
+        let path = dir.join(name);
+        let text = serde_json::to_string_pretty(value).unwrap_or_default();
+        let r = std::fs::create_dir_all(dir)
+            .map_err(|e| e.to_string())
+            .and_then(|_| xsurf_formats::write_bytes_atomic(&path, text.as_bytes()).map_err(|e| e.to_string()));
+        if let Err(e) = r {
+            self.write_failed(format!("cannot write {}: {e}", path.display()));
         }
     }
 

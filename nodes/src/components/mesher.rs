@@ -318,8 +318,6 @@ impl MesherNode {
         let missing = self.gaps.missing(stamp, self.cfg.gap_factor);
         if let Some(b) = before.filter(|_| missing > 0) {
             self.account.gaps.push((b, stamp, missing));
-        }
-        if missing > 0 {
             self.dropped_frames += u64::from(missing);
             log::warn!("{}: {missing} frame(s) missing before {} (stamp gap)", self.camera, convert::fmt_stamp(stamp));
             let empty = Profile {
