@@ -80,3 +80,13 @@ pub fn copy_bag(src: &Path, dst: &Path) {
         std::fs::copy(e.path(), dst.join(e.file_name())).unwrap();
     }
 }
+
+/// The tests of one binary that run a DDS graph take their turns: two at once on a 2-core
+/// machine slow discovery past the tools' timeouts (a parameter call gave up after 15 s in CI)
+/// and starve the cameras (a "whole" scan lost a tenth of its frames).
+static ONE_GRAPH_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Holds the machine for one graph until the guard is dropped.
+pub fn one_graph_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    ONE_GRAPH_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}

@@ -11,14 +11,6 @@ use std::path::Path;
 use std::process::Command;
 use xsurf_core::eval;
 
-/// The tests that run a DDS graph take their turns: two at once on a 2-core machine slow
-/// discovery past the tools' timeouts (a parameter call gave up after 15 s in CI).
-static ONE_GRAPH_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn one_graph_at_a_time() -> std::sync::MutexGuard<'static, ()> {
-    ONE_GRAPH_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
-}
-
 #[test]
 fn nodes_exchange_images_and_clouds_with_an_independent_dds_peer() {
     graph("separate", "edge_detector_cam1.log", "[0, 0, 0, 0]");

@@ -81,6 +81,7 @@ fn live(mode: &str, seconds: u32) {
 /// One after the other: each mode needs the two cores for its cameras.
 #[test]
 fn live_graph_composed_then_separate_processes() {
+    let _turn = one_graph_at_a_time();
     live("composed", 60);
     live("separate", 60);
 }
@@ -90,6 +91,7 @@ fn live_graph_composed_then_separate_processes() {
 /// node whose parameters are refused.
 #[test]
 fn a_node_that_dies_stops_the_launch() {
+    let _turn = one_graph_at_a_time();
     let netns = root().join("../shared/tools/netns-run");
     let dir = scratch("launch-dies");
     let launch = dir.join("dies.launch.yaml");
@@ -170,6 +172,7 @@ fn a_node_with_respawn_is_started_again() {
 #[test]
 fn a_killed_triangulator_is_respawned_and_the_scan_says_what_it_lost() {
     let Some(py) = python() else { return };
+    let _turn = one_graph_at_a_time();
     let netns = root().join("../shared/tools/netns-run");
     let out = scratch("kill-node");
     let files = out.join("files");

@@ -358,6 +358,8 @@ struct Running {
     /// When it is to be started again.
     restart_at: Option<Instant>,
     restarts: u32,
+    /// SIGKILL sent (it did not stop on SIGTERM).
+    killed: bool,
 }
 
 fn spawn(label: &str, mut cmd: Command) -> anyhow::Result<Running> {
@@ -378,7 +380,7 @@ fn spawn(label: &str, mut cmd: Command) -> anyhow::Result<Running> {
         });
     }
     eprintln!("[launch] started {label} (pid {})", child.id());
-    Ok(Running { label: label.to_string(), child, status: None, respawn: None, restart_at: None, restarts: 0 })
+    Ok(Running { label: label.to_string(), child, status: None, respawn: None, restart_at: None, restarts: 0, killed: false })
 }
 
 fn terminate(r: &Running) {
@@ -516,8 +518,9 @@ pub fn run(nodes: &[NodeSpec], composed: bool) -> anyhow::Result<ExitCode> {
             running.iter().filter(|r| r.status.is_none()).for_each(terminate);
         }
         if stopping_since.is_some_and(|t| t.elapsed() > Duration::from_secs(10)) {
-            for r in running.iter_mut().filter(|r| r.status.is_none()) {
+            for r in running.iter_mut().filter(|r| r.status.is_none() && !r.killed) {
                 eprintln!("[launch] {} did not stop in 10 s: killed", r.label);
+                r.killed = true;
                 let _ = r.child.kill();
                 failed = true;
             }

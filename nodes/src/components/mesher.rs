@@ -2,7 +2,7 @@
 //! runs) and its mesh (`mesh`, at END), plus `<output_dir>/scan_<id>/<cam>.ply`.
 //!
 //! Scans are bounded by `/scan/events` from whoever publishes them: frames outside START..END
-//! belong to no scan (counted). A source without events (a bag of one scan) gives scan 0, from
+//! belong to no scan (counted; a frame stamped before START that arrives after it as well). A source without events (a bag of one scan) gives scan 0, from
 //! the first frame with points. Gaps in the frame stamps are counted as dropped frames, logged, and kept as
 //! empty grid columns so the mesh does not bridge them (a single missing frame is filled).
 
@@ -439,6 +439,12 @@ impl Component for MesherNode {
                     self.start(0, None);
                 }
                 let stamp = c.header.stamp.nanos();
+                // A frame exposed before START that arrives after it (the pipeline's latency)
+                // is not part of the scan either: scans are bounded by stamps, not arrivals.
+                if self.account.start_ns.is_some_and(|s| stamp < s) {
+                    self.outside_scan += 1;
+                    return Ok(());
+                }
                 self.push(stamp, &p)?;
                 if let Some(period) = self.cfg.cloud_period_ns {
                     if stamp.saturating_sub(self.last_cloud_ns) >= period {
@@ -558,5 +564,14 @@ mod tests {
         // A camera_info that no camera has is refused by name.
         let bad = CameraInfo { width: 0, height: 0, ..Default::default() };
         assert!(m.handle(IN_INFO, &Msg::CameraInfo(Arc::new(bad)), &mut out).unwrap_err().to_string().contains("0x0"));
+        // A scan from START at 10 s: a frame exposed at 9 s that arrives after START is not
+        // part of it (nor the reason for a cloud stamped before START); the 11 s one is.
+        let mut start = ScanEvent { scan_id: 3, event: ScanEvent::START, ..Default::default() };
+        start.header.stamp.sec = 10;
+        m.handle(IN_EVENTS, &Msg::ScanEvent(Arc::new(start)), &mut out).unwrap();
+        let outside = m.outside_scan;
+        m.handle(IN_PROFILE, &profile(40, 9), &mut out).unwrap();
+        m.handle(IN_PROFILE, &profile(40, 11), &mut out).unwrap();
+        assert_eq!((m.outside_scan - outside, m.grid.frames(), m.account.first_ns), (1, 1, Some(11_000_000_000)));
     }
 }
