@@ -52,6 +52,38 @@ pub fn iso(t: &Transform) -> Iso3 {
     )
 }
 
+/// A received transform's pose, checked as tf2 checks what it is given (`TF_NAN_INPUT`,
+/// `TF_DENORMALIZED_QUATERNION`, no frame id, a self transform): a finite translation and a
+/// quaternion whose squared norm is within 0.01 of 1 (normalized here), between two named,
+/// different frames. The error names the transform and what is wrong with it.
+pub fn rigid(t: &TransformStamped) -> Result<Iso3, String> {
+    let (parent, child) = (t.header.frame_id.trim_start_matches('/'), t.child_frame_id.trim_start_matches('/'));
+    let name = format!("transform {parent:?} -> {child:?}");
+    if parent.is_empty() || child.is_empty() {
+        return Err(format!("{name}: a frame id is empty"));
+    }
+    if parent == child {
+        return Err(format!("{name}: a frame cannot be its own parent"));
+    }
+    let (v, q) = (t.transform.translation, t.transform.rotation);
+    if ![v.x, v.y, v.z].iter().all(|x| x.is_finite()) {
+        return Err(format!("{name}: translation ({}, {}, {}) is not finite", v.x, v.y, v.z));
+    }
+    let n2 = q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w;
+    if !n2.is_finite() || (n2 - 1.0).abs() > 0.01 {
+        return Err(format!(
+            "{name}: rotation ({}, {}, {}, {}) is not a unit quaternion (norm {:.4})",
+            q.x,
+            q.y,
+            q.z,
+            q.w,
+            n2.sqrt()
+        ));
+    }
+    let n = n2.sqrt();
+    Ok(Iso3::from_parts(Vec3::new(v.x, v.y, v.z), Quat { x: q.x / n, y: q.y / n, z: q.z / n, w: q.w / n }))
+}
+
 /// A pose as a stamped transform `parent -> child`.
 pub fn transform_stamped(stamp_ns: i64, parent: &str, child: &str, t: &Iso3) -> TransformStamped {
     let q = t.quaternion();

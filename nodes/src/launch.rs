@@ -380,7 +380,15 @@ fn spawn(label: &str, mut cmd: Command) -> anyhow::Result<Running> {
         });
     }
     eprintln!("[launch] started {label} (pid {})", child.id());
-    Ok(Running { label: label.to_string(), child, status: None, respawn: None, restart_at: None, restarts: 0, killed: false })
+    Ok(Running {
+        label: label.to_string(),
+        child,
+        status: None,
+        respawn: None,
+        restart_at: None,
+        restarts: 0,
+        killed: false,
+    })
 }
 
 fn terminate(r: &Running) {

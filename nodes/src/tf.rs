@@ -29,24 +29,38 @@ impl TfBuffer {
         track.max_gap_ns = max_gap_ns;
         Self { table_frame: table_frame.into(), carm_frame: carm_frame.into(), statics: HashMap::new(), track }
     }
-    /// Adds the transforms of a `/tf_static` message.
-    pub fn add_static(&mut self, m: &TFMessage) {
+    /// Adds the transforms of a `/tf_static` message. A transform that is not rigid (see
+    /// [`convert::rigid`]) is refused and the others are kept; the error names the refused ones.
+    pub fn add_static(&mut self, m: &TFMessage) -> Result<(), String> {
+        let mut refused = Vec::new();
         for t in &m.transforms {
-            self.statics.insert(
-                t.child_frame_id.trim_start_matches('/').to_string(),
-                (t.header.frame_id.trim_start_matches('/').to_string(), convert::iso(&t.transform)),
-            );
+            match convert::rigid(t) {
+                Ok(iso) => {
+                    self.statics.insert(
+                        t.child_frame_id.trim_start_matches('/').to_string(),
+                        (t.header.frame_id.trim_start_matches('/').to_string(), iso),
+                    );
+                }
+                Err(e) => refused.push(e),
+            }
         }
+        refusal(refused, m.transforms.len())
     }
-    /// Adds the `table -> carm` samples of a `/tf` message (other transforms are ignored).
-    pub fn add_dynamic(&mut self, m: &TFMessage) {
+    /// Adds the `table -> carm` samples of a `/tf` message (other transforms are ignored). A
+    /// sample that is not rigid is refused, the others are kept; the error names the refused.
+    pub fn add_dynamic(&mut self, m: &TFMessage) -> Result<(), String> {
+        let mut refused = Vec::new();
         for t in &m.transforms {
             if t.header.frame_id.trim_start_matches('/') == self.table_frame
                 && t.child_frame_id.trim_start_matches('/') == self.carm_frame
             {
-                self.track.push(t.header.stamp.nanos(), &convert::iso(&t.transform));
+                match convert::rigid(t) {
+                    Ok(iso) => self.track.push(t.header.stamp.nanos(), &iso),
+                    Err(e) => refused.push(e),
+                }
             }
         }
+        refusal(refused, m.transforms.len())
     }
     /// The newest `table -> carm` stamp.
     pub fn latest_pose_stamp(&self) -> Option<i64> {
@@ -77,5 +91,13 @@ impl TfBuffer {
     /// Forgets the moving pose (a new scan).
     pub fn clear_dynamic(&mut self) {
         self.track.clear();
+    }
+}
+
+/// The error of a TF message some of whose `total` transforms were refused.
+fn refusal(refused: Vec<String>, total: usize) -> Result<(), String> {
+    match refused.len() {
+        0 => Ok(()),
+        n => Err(format!("{n} of {total} transform(s) refused (the rest kept): {}", refused.join("; "))),
     }
 }

@@ -126,6 +126,32 @@ impl Runner {
         }
     }
 
+    /// Does one piece of work; `false` when the thread is to leave.
+    fn work(&mut self, w: Work, clock: &mut Option<i64>, finished: &mut bool) -> bool {
+        match w {
+            Work::Input(input, msg, sensor) => {
+                if sensor {
+                    self.fabric.inboxes[self.index].sensor_waiting.fetch_sub(1, Ordering::AcqRel);
+                }
+                let out = self.placed.handle(input, &msg);
+                self.publish(out);
+            }
+            Work::Clock(t) => *clock = Some(t),
+            Work::Reconfigure(params, name) => match self.placed.component.reconfigure(&params) {
+                Ok(()) => log::info!("{}: parameter {name} set", self.placed.name),
+                Err(e) => log::warn!("{}: parameter {name} refused: {e}", self.placed.name),
+            },
+            Work::Finish(ack) => {
+                *finished = true;
+                let out = self.placed.finish();
+                self.publish(out);
+                let _ = ack.send(());
+            }
+            Work::Stop => return false,
+        }
+        true
+    }
+
     fn run(mut self, rx: Receiver<Work>) -> Placed {
         if self.placed.component.bulk() {
             lower_this_thread();
@@ -140,25 +166,31 @@ impl Runner {
                 None => self.tick_period,
             };
             match rx.recv_timeout(timeout) {
-                Ok(Work::Input(input, msg, sensor)) => {
-                    if sensor {
-                        self.fabric.inboxes[self.index].sensor_waiting.fetch_sub(1, Ordering::AcqRel);
+                Ok(w) => {
+                    if !self.work(w, &mut clock, &mut finished) {
+                        break;
                     }
-                    let out = self.placed.handle(input, &msg);
-                    self.publish(out);
+                    // What is already waiting is handled before the next tick (up to a bound, so
+                    // that a flood cannot stop the ticks): a camera whose frame takes longer than
+                    // the gap between two poses renders from the newest pose, not from a backlog
+                    // that grows without end (and holds its Finish back at shutdown).
+                    let mut stop = false;
+                    for _ in 0..MAX_WORK_PER_TICK {
+                        match rx.try_recv() {
+                            Ok(w) => {
+                                if !self.work(w, &mut clock, &mut finished) {
+                                    stop = true;
+                                    break;
+                                }
+                            }
+                            Err(_) => break,
+                        }
+                    }
+                    if stop {
+                        break;
+                    }
                 }
-                Ok(Work::Clock(t)) => clock = Some(t),
-                Ok(Work::Reconfigure(params, name)) => match self.placed.component.reconfigure(&params) {
-                    Ok(()) => log::info!("{}: parameter {name} set", self.placed.name),
-                    Err(e) => log::warn!("{}: parameter {name} refused: {e}", self.placed.name),
-                },
-                Ok(Work::Finish(ack)) => {
-                    finished = true;
-                    let out = self.placed.finish();
-                    self.publish(out);
-                    let _ = ack.send(());
-                }
-                Ok(Work::Stop) | Err(RecvTimeoutError::Disconnected) => break,
+                Err(RecvTimeoutError::Disconnected) => break,
                 Err(RecvTimeoutError::Timeout) => {}
             }
             if finished {
@@ -176,6 +208,9 @@ impl Runner {
         self.placed
     }
 }
+
+/// Queued messages a node handles between two of its ticks at most.
+const MAX_WORK_PER_TICK: usize = 256;
 
 /// The running executor.
 pub struct Threads {
@@ -437,6 +472,57 @@ mod tests {
         .unwrap();
         assert_eq!(lowered, BULK_NICE.max(base));
         assert_eq!(std::thread::spawn(nice).join().unwrap(), base, "only the calling thread is lowered");
+    }
+
+    /// A camera: each tick (its frame) takes 20 ms; it keeps the newest pose it was given.
+    struct SlowTicker {
+        newest: Arc<Mutex<u32>>,
+    }
+    impl Component for SlowTicker {
+        fn node_name(&self) -> &'static str {
+            "camera"
+        }
+        fn inputs(&self) -> Vec<Port> {
+            vec![Port::new("/pose", Image::TYPE_NAME, QosClass::Reliable)]
+        }
+        fn outputs(&self) -> Vec<Port> {
+            Vec::new()
+        }
+        fn declarations(&self) -> Vec<ParamDecl> {
+            Vec::new()
+        }
+        fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
+            Ok(())
+        }
+        fn handle(&mut self, _: usize, msg: &Msg, _: &mut Outbox) -> Result<(), NodeError> {
+            *self.newest.lock().unwrap() = tag(msg);
+            Ok(())
+        }
+        fn tick(&mut self, _: i64, _: &mut Outbox) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Poses at 1 kHz into a camera whose frame takes 20 ms: every pose waiting is taken before
+    /// the next frame, so the camera renders from the newest and its backlog does not grow
+    /// (which once held a camera_driver's shutdown past the launcher's 10 s).
+    #[test]
+    fn a_slow_ticker_takes_what_is_waiting_before_its_next_tick() {
+        let (mut r, _) = graph(vec![(None, "/pose", Duration::ZERO)]);
+        let newest: Arc<Mutex<u32>> = Arc::default();
+        r.add(Box::new(SlowTicker { newest: newest.clone() }), "camera", "/", &[]);
+        let published: Arc<Mutex<u32>> = Arc::default();
+        let p = published.clone();
+        let tap: SharedTap = Arc::new(move |_: &str, m: &Msg| *p.lock().unwrap() = tag(m));
+        let g = Threads::start(r, tap, &[Duration::from_millis(1), Duration::from_millis(1)], false).unwrap();
+        std::thread::sleep(Duration::from_millis(400));
+        let (sent, taken) = (*published.lock().unwrap(), *newest.lock().unwrap());
+        let t0 = Instant::now();
+        g.finish();
+        assert!(sent > 100, "{sent}");
+        // One frame's worth of poses behind at most (20 at 1 kHz), with room for a slow machine.
+        assert!(taken + 60 >= sent, "the camera has pose {taken}, {sent} were sent");
+        assert!(t0.elapsed() < Duration::from_secs(1), "finish waited {:?}", t0.elapsed());
     }
 
     #[test]

@@ -234,14 +234,8 @@ impl CArmPoseNode {
                     "/surface/placements: {child} is not a rig camera's optical frame"
                 )));
             };
-            let (q, v) = (t.transform.rotation, t.transform.translation);
-            let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
-            if !((norm - 1.0).abs() < 1e-3 && v.x.is_finite() && v.y.is_finite() && v.z.is_finite()) {
-                return Err(NodeError::new(format!(
-                    "/surface/placements: {child}: not a rigid transform (quaternion norm {norm})"
-                )));
-            }
-            taken.push((cam, convert::iso(&t.transform)));
+            let iso = convert::rigid(t).map_err(|e| NodeError::new(format!("/surface/placements: {e}")))?;
+            taken.push((cam, iso));
         }
         self.placements.extend(taken);
         Ok(())

@@ -537,17 +537,24 @@ impl Component for CameraDriverNode {
                     if t.header.frame_id.trim_start_matches('/') == self.cfg.table_frame
                         && t.child_frame_id.trim_start_matches('/') == self.cfg.carm_frame
                     {
+                        // A pose that is not rigid is refused: the camera renders from the last good.
+                        let pose = convert::rigid(t).map_err(NodeError::new)?;
                         let s = t.header.stamp.nanos();
                         if self.poses[0].is_none_or(|(t0, _)| s > t0) {
                             self.poses[1] = self.poses[0];
-                            self.poses[0] = Some((s, convert::iso(&t.transform)));
+                            self.poses[0] = Some((s, pose));
                         }
                     }
                 }
                 Ok(())
             }
             (1, Msg::ScanEvent(e)) => {
-                self.laser_on = e.event == ScanEvent::START;
+                self.laser_on = match e.event {
+                    ScanEvent::START => true,
+                    ScanEvent::END | ScanEvent::ABORT => false,
+                    // An event no scan has does not turn the laser off in the middle of one.
+                    other => return Err(NodeError::new(format!("unknown scan event {other}"))),
+                };
                 Ok(())
             }
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),

@@ -790,7 +790,7 @@ impl Component for MergerNode {
                     t.header.frame_id.trim_start_matches('/') == self.cfg.frame_id
                         && t.child_frame_id.trim_start_matches('/') == "carm"
                 }) {
-                    let pose = convert::iso(&t.transform);
+                    let pose = convert::rigid(t).map_err(NodeError::new)?;
                     self.motion = Some(match self.motion {
                         None => Motion { first: pose, last: pose, turned_rad: 0.0, offset_m: 0.0 },
                         Some(m) => {
@@ -808,10 +808,7 @@ impl Component for MergerNode {
                 }
                 Ok(())
             }
-            (i, Msg::Tf(t)) if i == n + 3 => {
-                self.statics.add_static(t);
-                Ok(())
-            }
+            (i, Msg::Tf(t)) if i == n + 3 => self.statics.add_static(t).map_err(NodeError::new),
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
         }
     }

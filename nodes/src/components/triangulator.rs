@@ -280,14 +280,14 @@ impl Component for TriangulatorNode {
                 Ok(())
             }
             (IN_TF, Msg::Tf(t)) => {
-                self.tf.add_dynamic(t);
+                let added = self.tf.add_dynamic(t);
                 self.drain(out, false);
-                Ok(())
+                added.map_err(NodeError::new)
             }
             (IN_TF_STATIC, Msg::Tf(t)) => {
-                self.tf.add_static(t);
+                let added = self.tf.add_static(t);
                 self.tri = None;
-                Ok(())
+                added.map_err(NodeError::new)
             }
             (IN_EVENTS, Msg::ScanEvent(e)) => {
                 // At the end of a scan the lines still waiting for a pose are placed now, so the

@@ -525,12 +525,12 @@ impl Component for XrayAlignerNode {
     fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
         match (input, msg) {
             (IN_TF, Msg::Tf(t)) => {
-                self.tf.add_dynamic(t);
+                let added = self.tf.add_dynamic(t);
                 if self.pending.is_some() && self.end_seen_ns.is_some() {
                     let now = self.tf.latest_pose_stamp().unwrap_or(0);
                     self.try_place(now, false, out);
                 }
-                Ok(())
+                added.map_err(NodeError::new)
             }
             (IN_EVENTS, Msg::ScanEvent(e)) => {
                 let stamp = e.header.stamp.nanos();
