@@ -27,3 +27,13 @@ if ! [[ -x .venv/bin/vrml_check && .venv/bin/vrml_check -nt tests/vrml/vrml_chec
   fi
   g++ -O1 -o .venv/bin/vrml_check tests/vrml/vrml_check.cpp -lCoin
 fi
+# nftables: the two-host test's packet loss on its veth link (this kernel has no netem).
+if ! command -v nft >/dev/null; then
+  if [[ $(id -u) -eq 0 ]]; then
+    apt-get update -qq >/dev/null
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends nftables >/dev/null
+  else
+    echo "setup: nftables is needed for the two-host test: sudo apt-get install nftables" >&2
+    exit 1
+  fi
+fi

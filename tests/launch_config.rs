@@ -77,6 +77,22 @@ fn launch_file_starts_every_node_with_the_params_file() {
     assert!(nodes.iter().all(|n| n.param_files == [other.clone()]));
 }
 
+/// The two-host launch files together start the whole graph, each node once, with the same
+/// executables, respawn settings and params file as the one-host file.
+#[test]
+fn the_two_host_launch_files_split_the_graph() {
+    let load = |f: &str| xsurf_nodes::launch::load(&root().join("launch-config").join(f), &Default::default()).unwrap();
+    let key = |n: &xsurf_nodes::launch::NodeSpec| (n.fq_name(), n.exec.clone(), n.param_files.clone(), n.respawn);
+    let mut split: Vec<_> =
+        load("camera-host.launch.yaml").iter().chain(&load("processing-host.launch.yaml")).map(key).collect();
+    let mut whole: Vec<_> = load("xsurf.launch.yaml").iter().map(key).collect();
+    split.sort();
+    whole.sort();
+    assert_eq!(split, whole);
+    let cam: Vec<String> = load("camera-host.launch.yaml").iter().map(|n| n.fq_name()).collect();
+    assert_eq!(cam, ["/c_arm_pose", "/cam1/camera_driver", "/cam2/camera_driver"]);
+}
+
 #[test]
 fn a_bad_launch_file_is_named_and_refused() {
     let dir = scratch("bad-launch");

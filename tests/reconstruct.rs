@@ -977,6 +977,11 @@ fn dropped_frames_are_counted_and_their_gaps_timed_in_the_scan_report() {
         k += 1;
         if (21..=25).contains(&k) || k == 40 || k == 41 {
             vec![]
+        } else if k == 50 || k == 51 {
+            // Refused by the edge_detector (a row step shorter than a row): on the way, not lost.
+            let mut img: xsurf_msgs::sensor_msgs::Image = xsurf_msgs::cdr::decode(&m.data).unwrap();
+            img.step = 7;
+            vec![RawMessage { data: xsurf_msgs::cdr::encode(&img).unwrap(), ..m }]
         } else {
             vec![m]
         }
@@ -995,12 +1000,20 @@ fn dropped_frames_are_counted_and_their_gaps_timed_in_the_scan_report() {
         let s = stamps[i];
         format!("{}.{:09}", s.div_euclid(1_000_000_000), s.rem_euclid(1_000_000_000))
     };
-    // Images 1..=78 of which 21..=25 and 40, 41 are gone (0-based 20..=24, 39, 40).
-    assert_eq!(c1["frames_received"], n - 7, "{c1}");
-    assert_eq!(c1["frames_lost"], 7, "{c1}");
+    // Images 1..=78 of which 21..=25 and 40, 41 are gone (0-based 20..=24, 39, 40), and 50, 51
+    // refused by the edge_detector.
+    assert_eq!(c1["frames_received"], n - 9, "{c1}");
+    assert_eq!(c1["frames_lost"], 9, "{c1}");
     assert_eq!(c1["frames_expected"], n, "{c1}");
+    assert_eq!(c1["frames_lost_in_transport"], 7, "{c1}");
+    assert_eq!(c1["frames_refused_upstream"], 2, "{c1}");
+    assert_eq!(c1["refused"]["edge_detector"]["image"]["frames"], 2, "{c1}");
+    let why = c1["refused"]["edge_detector"]["image"]["first"].as_str().unwrap();
+    assert!(why.contains(&format!("image at {}", t(49))) && why.contains("row step 7"), "{why}");
+    assert_eq!(c1["upstream"]["edge_detector"]["frames_taken"], n - 9, "{c1}");
+    assert_eq!(c1["upstream"]["triangulator"]["frames_placed"], n - 9, "{c1}");
     let gaps = c1["gaps"].as_array().unwrap();
-    assert_eq!(gaps.len(), 2, "{c1}");
+    assert_eq!(gaps.len(), 3, "{c1}");
     assert_eq!(
         (gaps[0]["after"].as_str().unwrap(), gaps[0]["before"].as_str().unwrap()),
         (t(19).as_str(), t(25).as_str())
@@ -1011,11 +1024,22 @@ fn dropped_frames_are_counted_and_their_gaps_timed_in_the_scan_report() {
         (t(38).as_str(), t(41).as_str())
     );
     assert_eq!(gaps[1]["frames"], 2);
+    assert_eq!(
+        (gaps[2]["after"].as_str().unwrap(), gaps[2]["before"].as_str().unwrap()),
+        (t(48).as_str(), t(51).as_str())
+    );
     assert_eq!((c2["frames_received"].as_u64(), c2["frames_lost"].as_u64()), (Some(n), Some(0)), "{c2}");
     // The counts agree with the frames the bag holds, by an independent reader.
     if let Some(j) = checker("mcap_counts.py", &[&b.join("b_0.mcap")]) {
-        assert_eq!(j["topics"]["/cam1/image_raw"]["count"].as_u64(), c1["frames_received"].as_u64(), "{j}");
+        assert_eq!(
+            j["topics"]["/cam1/image_raw"]["count"].as_u64(),
+            c1["frames_received"].as_u64().map(|r| r + 2),
+            "{j}"
+        );
     }
-    assert!(err.contains("merger: scan 1: cam1 lost 7 of 78 frames (gaps: 5 after"), "{err}");
+    assert!(
+        err.contains("merger: scan 1: cam1 lost 9 of 78 frames (7 in transport, 2 refused on the way, 0 never sent; gaps: 5 after"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -15,6 +15,7 @@ use xsurf_core::image::Encoding;
 use xsurf_core::rig::Rig;
 use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene, SCENE_NAMES};
 use xsurf_msgs::sensor_msgs::{CameraInfo, CompressedImage, Image};
+use xsurf_msgs::std_msgs::StringMsg;
 use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
@@ -332,6 +333,9 @@ fn model_for(
     }
 }
 
+/// The output of the scan reports.
+const OUT_REPORT: usize = 2;
+
 /// The camera driver component.
 pub struct CameraDriverNode {
     cfg: Config,
@@ -340,6 +344,8 @@ pub struct CameraDriverNode {
     /// The two newest `table -> carm` samples, for extrapolating to the exposure.
     poses: [Option<(i64, Iso3)>; 2],
     laser_on: bool,
+    /// The frames of the current scan, for its report.
+    tally: super::tally::ScanTally,
     next_ns: Option<i64>,
     frames: u64,
     skipped: u64,
@@ -370,6 +376,7 @@ impl CameraDriverNode {
             scanner: None,
             poses: [None, None],
             laser_on: false,
+            tally: Default::default(),
             next_ns: None,
             frames: 0,
             skipped: 0,
@@ -424,6 +431,7 @@ impl CameraDriverNode {
         out.publish(1, Msg::CameraInfo(Arc::new(convert::camera_info(model, header))));
         out.publish(0, image);
         self.frames += 1;
+        self.tally.count(stamp);
     }
 
     /// V4L2 source: opens the camera when due (again after a failure, every second), then
@@ -519,6 +527,7 @@ impl Component for CameraDriverNode {
                 Some(_) => Port::new("image_raw/compressed", CompressedImage::TYPE_NAME, QosClass::Sensor),
             },
             Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
+            Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
         ]
     }
     fn declarations(&self) -> Vec<ParamDecl> {
@@ -530,7 +539,7 @@ impl Component for CameraDriverNode {
         self.rig_model = None;
         Ok(())
     }
-    fn handle(&mut self, input: usize, msg: &Msg, _out: &mut Outbox) -> Result<(), NodeError> {
+    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
         match (input, msg) {
             (0, Msg::Tf(tf)) => {
                 for t in &tf.transforms {
@@ -555,6 +564,9 @@ impl Component for CameraDriverNode {
                     // An event no scan has does not turn the laser off in the middle of one.
                     other => return Err(NodeError::new(format!("unknown scan event {other}"))),
                 };
+                if let Some(report) = self.tally.event(e, "camera_driver", &self.camera, "frames_sent") {
+                    out.publish(OUT_REPORT, report);
+                }
                 Ok(())
             }
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
@@ -569,6 +581,9 @@ impl Component for CameraDriverNode {
         self.next_ns
     }
     fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+        if let Some(report) = self.tally.due(now_ns) {
+            out.publish(OUT_REPORT, report);
+        }
         if matches!(self.cfg.source, Source::V4l2 { .. }) {
             self.poll_camera(now_ns, out);
             return;
@@ -580,6 +595,7 @@ impl Component for CameraDriverNode {
         // Stay on the frame grid; frames the host could not render in time are counted.
         let behind = (now_ns - next) / self.cfg.period_ns;
         self.skipped += behind as u64;
+        self.tally.skip(next, behind as u64);
         // The slot this frame fills: a late host skips slots (the counter) rather than letting
         // the stamps fall behind the clock the C-arm's pose is on.
         let slot = next + behind * self.cfg.period_ns;
@@ -668,6 +684,11 @@ impl Component for CameraDriverNode {
             }
         };
         self.publish_frame(now_ns, &model, img, out);
+    }
+    fn finish(&mut self, out: &mut Outbox) {
+        if let Some(report) = self.tally.report() {
+            out.publish(OUT_REPORT, report);
+        }
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
         vec![

@@ -6,7 +6,9 @@ use std::sync::Arc;
 use xsurf_core::edge::{Channel, EdgeConfig, EdgeDetector, LaserLine, Method, Orientation, Roi};
 use xsurf_core::limits;
 use xsurf_msgs::sensor_msgs::CameraInfo;
+use xsurf_msgs::std_msgs::StringMsg;
 use xsurf_msgs::xsurf_msgs::LaserLine as LineMsg;
+use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
@@ -196,10 +198,16 @@ pub struct EdgeDetectorNode {
     bad_images: u64,
     /// The image size camera_info gives, once one has arrived.
     camera_size: Option<(u32, u32)>,
+    /// The camera (the node's namespace), for the scan reports.
+    camera: String,
+    /// The images of the current scan refused, for its report.
+    tally: super::tally::ScanTally,
 }
 
 const IN_IMAGE: usize = 0;
 const IN_INFO: usize = 1;
+const IN_EVENTS: usize = 2;
+const OUT_REPORT: usize = 1;
 
 impl EdgeDetectorNode {
     /// Builds the node from its parameters.
@@ -214,60 +222,13 @@ impl EdgeDetectorNode {
             frames_with_line: 0,
             bad_images: 0,
             camera_size: None,
+            camera: String::new(),
+            tally: Default::default(),
         })
     }
-}
 
-impl Component for EdgeDetectorNode {
-    fn node_name(&self) -> &'static str {
-        "edge_detector"
-    }
-    fn inputs(&self) -> Vec<Port> {
-        match self.transport {
-            Transport::Raw => vec![
-                Port::new("image_raw", xsurf_msgs::sensor_msgs::Image::TYPE_NAME, QosClass::Sensor),
-                Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
-            ],
-            Transport::Compressed => vec![
-                Port::new(
-                    "image_raw/compressed",
-                    xsurf_msgs::sensor_msgs::CompressedImage::TYPE_NAME,
-                    QosClass::Sensor,
-                ),
-                Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
-            ],
-        }
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("laser_line", LineMsg::TYPE_NAME, QosClass::Reliable)]
-    }
-    fn declarations(&self) -> Vec<ParamDecl> {
-        declarations()
-    }
-    fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
-        if Transport::from_params(p)? != self.transport {
-            return Err(Params::invalid("image_transport", "fixed at start (it chooses the subscription)"));
-        }
-        self.detector = EdgeDetector::new(config(p)?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
-        Ok(())
-    }
-    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
-        if input == IN_INFO {
-            let Msg::CameraInfo(i) = msg else {
-                return Err(NodeError::new(format!("expected camera_info, got {}", msg.type_name())));
-            };
-            if !limits::image_side_ok(i.width) || !limits::image_side_ok(i.height) {
-                return Err(NodeError::new(format!(
-                    "camera_info size {}x{} is outside {} pixels a side",
-                    i.width,
-                    i.height,
-                    limits::image_side_text()
-                )));
-            }
-            self.camera_size = Some((i.width, i.height));
-            return Ok(());
-        }
-        debug_assert_eq!(input, IN_IMAGE);
+    /// Finds the line in one image.
+    fn image(&mut self, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
         let at = |h: &xsurf_msgs::std_msgs::Header| format!("{}.{:09}", h.stamp.sec, h.stamp.nanosec);
         // A compressed image is decoded once, here where it enters the pipeline.
         let decoded;
@@ -304,6 +265,87 @@ impl Component for EdgeDetectorNode {
         self.frames_with_line += u64::from(stats.found > 0);
         out.publish(0, Msg::LaserLine(Arc::new(convert::line_msg(&self.line, header.clone()))));
         Ok(())
+    }
+}
+
+impl Component for EdgeDetectorNode {
+    fn node_name(&self) -> &'static str {
+        "edge_detector"
+    }
+    fn set_identity(&mut self, _name: &str, namespace: &str) {
+        self.camera = namespace.trim_matches('/').rsplit('/').next().unwrap_or("").to_string();
+    }
+    fn inputs(&self) -> Vec<Port> {
+        let image = match self.transport {
+            Transport::Raw => Port::new("image_raw", xsurf_msgs::sensor_msgs::Image::TYPE_NAME, QosClass::Sensor),
+            Transport::Compressed => {
+                Port::new("image_raw/compressed", xsurf_msgs::sensor_msgs::CompressedImage::TYPE_NAME, QosClass::Sensor)
+            }
+        };
+        vec![
+            image,
+            Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
+            Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
+        ]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![
+            Port::new("laser_line", LineMsg::TYPE_NAME, QosClass::Reliable),
+            Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
+        ]
+    }
+    fn declarations(&self) -> Vec<ParamDecl> {
+        declarations()
+    }
+    fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
+        if Transport::from_params(p)? != self.transport {
+            return Err(Params::invalid("image_transport", "fixed at start (it chooses the subscription)"));
+        }
+        self.detector = EdgeDetector::new(config(p)?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
+        Ok(())
+    }
+    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+        match (input, msg) {
+            (IN_INFO, Msg::CameraInfo(i)) => {
+                if !limits::image_side_ok(i.width) || !limits::image_side_ok(i.height) {
+                    return Err(NodeError::new(format!(
+                        "camera_info size {}x{} is outside {} pixels a side",
+                        i.width,
+                        i.height,
+                        limits::image_side_text()
+                    )));
+                }
+                self.camera_size = Some((i.width, i.height));
+                Ok(())
+            }
+            (IN_EVENTS, Msg::ScanEvent(e)) => {
+                if let Some(report) = self.tally.event(e, "edge_detector", &self.camera, "frames_taken") {
+                    out.publish(OUT_REPORT, report);
+                }
+                Ok(())
+            }
+            (IN_IMAGE, _) => {
+                let r = self.image(msg, out);
+                if let Some(stamp) = msg.stamp_ns() {
+                    match &r {
+                        Ok(()) => self.tally.count(stamp),
+                        Err(e) => self.tally.refuse(stamp, "image", &e.to_string()),
+                    }
+                }
+                r
+            }
+            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+        }
+    }
+    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+        if let Some(report) = self.tally.due(now_ns) {
+            out.publish(OUT_REPORT, report);
+        }
+    }
+    fn finish(&mut self, out: &mut Outbox) {
+        if let Some(report) = self.tally.report() {
+            out.publish(OUT_REPORT, report);
+        }
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
         vec![

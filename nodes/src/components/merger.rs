@@ -247,6 +247,8 @@ pub struct MergerNode {
     scan_start_ns: Option<i64>,
     /// The meshers' reports of the current scan (`/scan/report`), by camera.
     reports: BTreeMap<String, serde_json::Value>,
+    /// The other per-camera nodes' reports of the current scan, by camera and node.
+    upstream: BTreeMap<(String, String), serde_json::Value>,
     scan_id: u32,
     pending_deadline: Option<i64>,
     merges: u64,
@@ -282,6 +284,7 @@ impl MergerNode {
             camera_sizes: BTreeMap::new(),
             scan_start_ns: None,
             reports: BTreeMap::new(),
+            upstream: BTreeMap::new(),
             scan_id: 0,
             pending_deadline: None,
             merges: 0,
@@ -531,8 +534,10 @@ impl MergerNode {
             log::warn!("merger: scan {}: no surface from {c}: merged without it", self.scan_id);
         }
         let mut incomplete = Vec::new();
+        let cameras: BTreeMap<&String, serde_json::Value> =
+            self.cfg.cameras.iter().filter_map(|c| Some((c, self.camera_account(c, self.reports.get(c)?)))).collect();
         for c in merged {
-            match self.reports.get(c) {
+            match cameras.get(c) {
                 Some(r) if r["frames_lost"].as_u64().unwrap_or(0) > 0 => {
                     let gaps: Vec<String> = r["gaps"]
                         .as_array()
@@ -541,10 +546,13 @@ impl MergerNode {
                         .map(|g| format!("{} after {}", g["frames"], g["after"].as_str().unwrap_or("?")))
                         .collect();
                     log::warn!(
-                        "merger: scan {}: {c} lost {} of {} frames (gaps: {})",
+                        "merger: scan {}: {c} lost {} of {} frames ({} in transport, {} refused on the way, {} never sent; gaps: {})",
                         self.scan_id,
                         r["frames_lost"],
                         r["frames_expected"],
+                        r["frames_lost_in_transport"],
+                        r["frames_refused_upstream"],
+                        r["frames_not_sent"],
                         if gaps.is_empty() { "at the ends".to_string() } else { gaps.join(", ") }
                     );
                     incomplete.push(c.clone());
@@ -558,8 +566,41 @@ impl MergerNode {
             "merged": merged,
             "missing": missing,
             "incomplete": incomplete,
-            "cameras": self.cfg.cameras.iter().filter_map(|c| self.reports.get(c)).collect::<Vec<_>>(),
+            "cameras": cameras.into_values().collect::<Vec<_>>(),
         })
+    }
+
+    /// Camera `c`'s account of the scan: its mesher's report, the reports of the nodes before
+    /// it (under `upstream`, by node), and the frames the mesher did not get, told apart:
+    /// refused on the way (`frames_refused_upstream`, reasons under `refused`), never sent (a
+    /// camera behind its rate: `frames_not_sent`), and lost in transport (the rest: what the
+    /// camera sent in the scan, less what the mesher took or refused and what was refused on
+    /// the way; without the camera_driver's report, the mesher's gaps less the other two).
+    fn camera_account(&self, c: &str, mesher: &serde_json::Value) -> serde_json::Value {
+        let mut r = mesher.clone();
+        let nodes: Vec<(&String, &serde_json::Value)> =
+            self.upstream.iter().filter(|((cam, _), _)| cam == c).map(|((_, node), v)| (node, v)).collect();
+        let count = |v: &serde_json::Value, k: &str| v[k].as_u64().unwrap_or(0);
+        let refused: u64 =
+            nodes.iter().filter(|(n, _)| *n != "camera_driver").map(|(_, v)| count(v, "frames_refused")).sum();
+        let driver = nodes.iter().find(|(n, _)| *n == "camera_driver").map(|(_, v)| *v);
+        let not_sent = driver.map_or(0, |v| count(v, "frames_skipped"));
+        let (received, lost) = (count(mesher, "frames_received"), count(mesher, "frames_lost"));
+        let in_transport = match driver {
+            Some(v) => count(v, "frames_sent")
+                .saturating_sub(received + count(mesher, "profiles_refused"))
+                .saturating_sub(refused),
+            None => lost.saturating_sub(refused + not_sent),
+        };
+        r["frames_sent"] = driver.map_or(serde_json::Value::Null, |v| v["frames_sent"].clone());
+        r["frames_not_sent"] = not_sent.into();
+        r["frames_refused_upstream"] = refused.into();
+        r["frames_lost_in_transport"] = in_transport.into();
+        r["refused"] =
+            nodes.iter().map(|(n, v)| ((*n).clone(), v["refused"].clone())).collect::<serde_json::Map<_, _>>().into();
+        r["upstream"] =
+            nodes.iter().map(|(n, v)| ((*n).clone(), (*v).clone())).collect::<serde_json::Map<_, _>>().into();
+        r
     }
 
     fn write(
@@ -743,9 +784,14 @@ impl Component for MergerNode {
                 let r: serde_json::Value = serde_json::from_str(&t.data)
                     .map_err(|e| NodeError::new(format!("/scan/report: not JSON: {e}")))?;
                 let cam = r["camera"].as_str().unwrap_or("").to_string();
+                let node = r["node"].as_str().unwrap_or("mesher").to_string();
                 // A report of another scan, or of no camera of ours, is not this merge's.
                 if r["scan_id"].as_u64() == Some(u64::from(self.scan_id)) && self.cfg.cameras.contains(&cam) {
-                    self.reports.insert(cam, r);
+                    if node == "mesher" {
+                        self.reports.insert(cam, r);
+                    } else {
+                        self.upstream.insert((cam, node), r);
+                    }
                 }
                 Ok(())
             }
@@ -772,6 +818,7 @@ impl Component for MergerNode {
                         self.scan_id = e.scan_id;
                         self.scan_start_ns = Some(e.header.stamp.nanos());
                         self.reports.clear();
+                        self.upstream.clear();
                     }
                     ScanEvent::END => {
                         self.scan_id = e.scan_id;

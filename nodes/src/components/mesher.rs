@@ -79,6 +79,13 @@ pub fn declarations() -> Vec<ParamDecl> {
             "a stamp gap above this many nominal frame periods counts as dropped frames",
         ),
         decl(
+            "end_grace_s",
+            V::Double(0.3),
+            "s",
+            "after END or ABORT, profiles stamped before it (exposed in the scan, still on their way) \
+             are taken for this long before the scan is closed (0: close at END)",
+        ),
+        decl(
             "line_orientation",
             V::String("vertical".into()),
             "",
@@ -96,6 +103,7 @@ struct Config {
     camera: String,
     frame_id: String,
     gap_factor: f64,
+    end_grace_ns: i64,
     orientation: Orientation,
 }
 
@@ -119,6 +127,10 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     if !(gap_factor > 1.0) {
         return Err(Params::invalid("gap_factor", format!("{gap_factor:?} must be > 1")));
     }
+    let grace = p.f64("end_grace_s")?;
+    if !(0.0..=10.0).contains(&grace) {
+        return Err(Params::invalid("end_grace_s", format!("{grace:?} is not in [0, 10]")));
+    }
     let orient = p.string("line_orientation")?;
     let orientation = Orientation::parse(&orient)
         .ok_or_else(|| Params::invalid("line_orientation", format!("{orient:?} is not vertical or horizontal")))?;
@@ -135,6 +147,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         camera: p.string("camera")?,
         frame_id: p.string("frame_id")?,
         gap_factor,
+        end_grace_ns: (grace * 1e9) as i64,
         orientation,
     })
 }
@@ -204,6 +217,7 @@ impl ScanAccount {
         let t = |ns: Option<i64>| ns.map(convert::fmt_stamp);
         serde_json::json!({
             "scan_id": scan_id,
+            "node": "mesher",
             "camera": camera,
             "aborted": aborted,
             "start": t(self.start_ns),
@@ -232,6 +246,11 @@ pub struct MesherNode {
     camera: String,
     scan_id: u32,
     active: bool,
+    /// END or ABORT seen, the scan not yet closed: `(aborted, end stamp)`; closed at the end
+    /// stamp plus `end_grace_s`, or by the first profile stamped after it.
+    closing: Option<(bool, i64)>,
+    /// The last profiles that arrived between scans, `(stamp, profile)`.
+    early: std::collections::VecDeque<(i64, Profile)>,
     /// Once a scan event has been seen, scans are bounded by events only.
     events_seen: bool,
     grid: Grid,
@@ -255,6 +274,9 @@ pub struct MesherNode {
     account: ScanAccount,
 }
 
+/// Profiles kept between scans for a START event that arrives after them.
+const EARLY_FRAMES: usize = 8;
+
 const IN_PROFILE: usize = 0;
 const IN_EVENTS: usize = 1;
 const IN_INFO: usize = 2;
@@ -273,6 +295,8 @@ impl MesherNode {
             cfg,
             scan_id: 0,
             active: false,
+            closing: None,
+            early: Default::default(),
             events_seen: false,
             grid: Grid::default(),
             gaps: GapDetector::default(),
@@ -343,7 +367,15 @@ impl MesherNode {
         Ok(())
     }
 
+    /// Closes the scan whose END or ABORT has been seen, if any.
+    fn close_pending(&mut self, out: &mut Outbox) {
+        if let Some((aborted, end)) = self.closing.take() {
+            self.close(aborted, Some(end), out);
+        }
+    }
+
     fn close(&mut self, aborted: bool, end_ns: Option<i64>, out: &mut Outbox) {
+        self.closing = None;
         if !self.active {
             return;
         }
@@ -430,15 +462,31 @@ impl Component for MesherNode {
             (IN_PROFILE, Msg::Cloud(c)) => {
                 let p = convert::cloud_profile(c).map_err(|e| NodeError::new(format!("profile: {e}")))?;
                 if !self.active {
-                    // Outside a scan bounded by events, frames belong to no scan. Without any
-                    // event (a bag of one scan), the first frame with points starts scan 0.
-                    if self.events_seen || p.valid() == 0 {
+                    // Outside a scan bounded by events, frames belong to no scan; the last few
+                    // are kept, since a frame stamped after START may arrive before the START
+                    // event. Without any event (a bag of one scan), the first frame with
+                    // points starts scan 0.
+                    if self.events_seen {
+                        self.early.push_back((c.header.stamp.nanos(), p));
+                        if self.early.len() > EARLY_FRAMES {
+                            self.early.pop_front();
+                            self.outside_scan += 1;
+                        }
+                        return Ok(());
+                    }
+                    if p.valid() == 0 {
                         self.outside_scan += 1;
                         return Ok(());
                     }
                     self.start(0, None);
                 }
                 let stamp = c.header.stamp.nanos();
+                // A frame exposed after END: the scan it would close is complete.
+                if self.closing.is_some_and(|(_, end)| stamp >= end) {
+                    self.close_pending(out);
+                    self.outside_scan += 1;
+                    return Ok(());
+                }
                 // A frame exposed before START that arrives after it (the pipeline's latency)
                 // is not part of the scan either: scans are bounded by stamps, not arrivals.
                 if self.account.start_ns.is_some_and(|s| stamp < s) {
@@ -459,12 +507,26 @@ impl Component for MesherNode {
                 self.events_seen = true;
                 match e.event {
                     ScanEvent::START => {
+                        self.close_pending(out);
                         self.close(false, None, out);
                         self.last_mesh.clear();
-                        self.start(e.scan_id, Some(e.header.stamp.nanos()));
+                        let start = e.header.stamp.nanos();
+                        self.start(e.scan_id, Some(start));
+                        for (stamp, p) in std::mem::take(&mut self.early) {
+                            if stamp < start {
+                                self.outside_scan += 1;
+                            } else if let Err(e) = self.push(stamp, &p) {
+                                log::warn!("{}: profile at {}: {e}", self.camera, convert::fmt_stamp(stamp));
+                            }
+                        }
                     }
-                    ScanEvent::END if self.active => self.close(false, Some(e.header.stamp.nanos()), out),
-                    ScanEvent::ABORT if self.active => self.close(true, Some(e.header.stamp.nanos()), out),
+                    ScanEvent::END | ScanEvent::ABORT if self.active && self.closing.is_none() => {
+                        let aborted = e.event == ScanEvent::ABORT;
+                        self.closing = Some((aborted, e.header.stamp.nanos()));
+                        if self.cfg.end_grace_ns == 0 {
+                            self.close_pending(out);
+                        }
+                    }
                     ScanEvent::END | ScanEvent::ABORT => {}
                     other => return Err(NodeError::new(format!("unknown scan event {other}"))),
                 }
@@ -490,9 +552,15 @@ impl Component for MesherNode {
         }
     }
     fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+        if self.closing.is_some_and(|(_, end)| now_ns >= end.saturating_add(self.cfg.end_grace_ns)) {
+            self.close_pending(out);
+        }
         self.last_mesh.tick(self.cfg.republish_ns, now_ns, out);
     }
     fn finish(&mut self, out: &mut Outbox) {
+        self.outside_scan += self.early.len() as u64;
+        self.early.clear();
+        self.close_pending(out);
         self.close(false, None, out);
     }
     /// Bulk work: the live host runs it behind the frame path.

@@ -7,6 +7,7 @@ pub mod camera_driver;
 pub mod edge_detector;
 pub mod merger;
 pub mod mesher;
+mod tally;
 pub mod triangulator;
 pub mod xray_aligner;
 

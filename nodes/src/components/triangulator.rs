@@ -12,6 +12,7 @@ use xsurf_core::camera::CameraModel;
 use xsurf_core::edge::LaserLine as CoreLine;
 use xsurf_core::triangulate::{CameraGeometry, Profile, Triangulator, TriangulatorConfig};
 use xsurf_msgs::sensor_msgs::{CameraInfo, PointCloud2};
+use xsurf_msgs::std_msgs::StringMsg;
 use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::{LaserLine, ScanEvent};
 use xsurf_msgs::RosMessage;
@@ -140,6 +141,10 @@ pub struct TriangulatorNode {
     points: u64,
     unplaced: u64,
     outside_volume: u64,
+    /// The camera (the node's namespace), for the scan reports.
+    camera: String,
+    /// The lines of the current scan placed and refused, for its report.
+    tally: super::tally::ScanTally,
 }
 
 const IN_LINE: usize = 0;
@@ -147,6 +152,7 @@ const IN_INFO: usize = 1;
 const IN_TF: usize = 2;
 const IN_TF_STATIC: usize = 3;
 const IN_EVENTS: usize = 4;
+const OUT_REPORT: usize = 1;
 
 impl TriangulatorNode {
     /// Builds the node from its parameters.
@@ -165,6 +171,8 @@ impl TriangulatorNode {
             points: 0,
             unplaced: 0,
             outside_volume: 0,
+            camera: String::new(),
+            tally: Default::default(),
         })
     }
 
@@ -223,7 +231,9 @@ impl TriangulatorNode {
                 Ok(p) => p,
                 Err(e) => {
                     self.unplaced += 1;
-                    out.refuse(IN_LINE, NodeError::new(format!("line at {}: {e}", convert::fmt_stamp(stamp))));
+                    let e = NodeError::new(format!("line at {}: {e}", convert::fmt_stamp(stamp)));
+                    self.tally.refuse(stamp, "line", &e.to_string());
+                    out.refuse(IN_LINE, e);
                     continue;
                 }
             };
@@ -235,6 +245,7 @@ impl TriangulatorNode {
             let cloud: PointCloud2 =
                 convert::profile_cloud(&self.profile, convert::header(stamp, &self.cfg.table_frame));
             out.publish(0, Msg::Cloud(Arc::new(cloud)));
+            self.tally.count(stamp);
         }
     }
 }
@@ -242,6 +253,9 @@ impl TriangulatorNode {
 impl Component for TriangulatorNode {
     fn node_name(&self) -> &'static str {
         "triangulator"
+    }
+    fn set_identity(&mut self, _name: &str, namespace: &str) {
+        self.camera = namespace.trim_matches('/').rsplit('/').next().unwrap_or("").to_string();
     }
     fn inputs(&self) -> Vec<Port> {
         vec![
@@ -253,7 +267,10 @@ impl Component for TriangulatorNode {
         ]
     }
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("profile", PointCloud2::TYPE_NAME, QosClass::Reliable)]
+        vec![
+            Port::new("profile", PointCloud2::TYPE_NAME, QosClass::Reliable),
+            Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
+        ]
     }
     fn declarations(&self) -> Vec<ParamDecl> {
         declarations()
@@ -268,7 +285,11 @@ impl Component for TriangulatorNode {
             (IN_LINE, Msg::LaserLine(l)) => {
                 self.lines += 1;
                 // Checked on arrival, so that a malformed line is refused as itself.
-                let core = convert::core_line(l).map_err(NodeError::new)?;
+                let core = convert::core_line(l).map_err(|e| {
+                    let e = NodeError::new(e);
+                    self.tally.refuse(l.header.stamp.nanos(), "line", &e.to_string());
+                    e
+                })?;
                 self.pending.push_back((l.clone(), Arc::new(core)));
                 self.drain(out, false);
                 Ok(())
@@ -295,13 +316,24 @@ impl Component for TriangulatorNode {
                 if e.event != ScanEvent::START {
                     self.drain(out, true);
                 }
+                if let Some(report) = self.tally.event(e, "triangulator", &self.camera, "frames_placed") {
+                    out.publish(OUT_REPORT, report);
+                }
                 Ok(())
             }
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
         }
     }
+    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+        if let Some(report) = self.tally.due(now_ns) {
+            out.publish(OUT_REPORT, report);
+        }
+    }
     fn finish(&mut self, out: &mut Outbox) {
         self.drain(out, true);
+        if let Some(report) = self.tally.report() {
+            out.publish(OUT_REPORT, report);
+        }
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
         vec![
