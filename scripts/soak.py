@@ -1,0 +1,107 @@
+#!/usr/bin/env python3
+"""A long run of the graph (issue 24, item 6; run by scripts/soak.sh inside netns-run).
+
+Starts `xsurf launch LAUNCH [--composed] params:=PARAMS` and, for SECONDS, asks c_arm_pose for a
+new scan (START on /scan/request, from this Cyclone DDS peer) as soon as the merger has written
+the last one: back-to-back scans. Every 5 s it samples each process's resident memory (VmRSS).
+At the end it stops the launcher with SIGTERM and reads every scan's scan_report.json.
+Prints one JSON line: scans asked and written, frames sent / received / lost (in transport,
+refused, never sent) summed over scans and cameras, and per process the resident memory after
+the warm-up (the first WARMUP s) and at the end, and its growth.
+usage: soak.py BIN_DIR LAUNCH PARAMS MODE SECONDS FILES OUT [WARMUP]
+"""
+import json
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import time
+
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent / "tests/py"))
+from bench_live_probe import descendants, label  # noqa: E402
+from ros_types import Header, ScanEvent, Time  # noqa: E402
+
+
+def rss(pid):
+    try:
+        for line in (pathlib.Path("/proc") / str(pid) / "status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+def main(bin_dir, launch, params, mode, seconds, files, out, warmup="60"):
+    seconds, warmup, files, out = float(seconds), float(warmup), pathlib.Path(files), pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    args = [str(pathlib.Path(bin_dir) / "xsurf"), "launch", launch, f"params:={params}"]
+    if mode == "composed":
+        args.insert(3, "--composed")
+    log = open(out / "launch.log", "w")
+    launcher = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, env=dict(os.environ, ROS_LOCALHOST_ONLY="1"))
+    dp = DomainParticipant(0)
+    qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(10))
+    request = DataWriter(dp, Topic(dp, "rt/scan/request", ScanEvent), qos=qos)
+    t0 = time.time()
+    samples = {}  # label -> [(t, rss)]
+    next_sample, asked, last_asked_for = 0.0, 1, 1  # scan 1 starts by itself
+    while time.time() - t0 < seconds and launcher.poll() is None:
+        now = time.time() - t0
+        if now >= next_sample:
+            next_sample = now + 5.0
+            for p in descendants(launcher.pid):
+                name, r = label(p), rss(p)
+                if name and r:
+                    samples.setdefault(name, []).append((now, r))
+        # The scan just asked for is written: ask for the next one.
+        if (files / f"scan_{last_asked_for}" / "scan_report.json").is_file():
+            t = time.time()
+            request.write(ScanEvent(header=Header(stamp=Time(sec=int(t), nanosec=int((t % 1) * 1e9)), frame_id="table"),
+                                    scan_id=0, event=0))
+            asked += 1
+            last_asked_for += 1
+        time.sleep(0.2)
+    launcher.send_signal(signal.SIGTERM)
+    try:
+        exit_code = launcher.wait(timeout=60)
+    except subprocess.TimeoutExpired:
+        launcher.kill()
+        exit_code = "killed"
+    totals = {"frames_sent": 0, "frames_received": 0, "frames_lost": 0, "frames_lost_in_transport": 0,
+              "frames_refused_upstream": 0, "frames_not_sent": 0}
+    written, incomplete, missing = 0, 0, 0
+    for k in range(1, last_asked_for + 1):
+        f = files / f"scan_{k}" / "scan_report.json"
+        if not f.is_file():
+            continue
+        r = json.loads(f.read_text())
+        written += (files / f"scan_{k}" / "merged.ply").is_file()
+        incomplete += len(r["incomplete"])
+        missing += len(r["missing"])
+        for c in r["cameras"]:
+            for key in totals:
+                totals[key] += c.get(key) or 0
+    memory = {}
+    for name, s in sorted(samples.items()):
+        after = [r for t, r in s if t >= warmup]
+        if len(after) >= 2:
+            memory[name] = {"rss_after_warmup_mib": round(after[0] / 2**20, 1), "rss_end_mib": round(after[-1] / 2**20, 1),
+                            "rss_max_mib": round(max(after) / 2**20, 1),
+                            "growth_percent": round(100 * (after[-1] - after[0]) / after[0], 1)}
+    print(json.dumps({"mode": mode, "seconds": seconds, "launcher_exit": exit_code, "scans_asked": asked,
+                      "scans_reported": sum((files / f"scan_{k}" / "scan_report.json").is_file() for k in range(1, last_asked_for + 1)),
+                      "surfaces_written": written, "cameras_incomplete": incomplete, "cameras_missing": missing,
+                      **totals, "memory": memory}))
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:9])
