@@ -234,8 +234,9 @@ fn a_killed_triangulator_is_respawned_and_the_scan_says_what_it_lost() {
 /// NaN transforms, the 0x0 / orientation 9 / 10 NaN samples LaserLine that once fixed a
 /// camera's grid, bad profiles and clouds, bad scan events, requests and reports), then asks for a
 /// clean scan; ten times over. Every process stays up (no exit, no respawn), every refusal is
-/// counted, and each scan's merged surface equals the clean first scan's within 1 % (the points
-/// over the pyramid's base) and meets the live accuracy bounds against the true pyramid.
+/// counted, and each scan's merged surface equals the clean first scan's within 1 % (its
+/// coverage of the pyramid's base; the points there within 3 %) and meets the live accuracy
+/// bounds against the true pyramid.
 #[test]
 fn malformed_messages_from_a_dds_peer_cost_only_themselves() {
     let Some(py) = python() else { return };
@@ -301,18 +302,45 @@ fn malformed_messages_from_a_dds_peer_cost_only_themselves() {
                 && (e.height_m - 0.086).abs() < 0.001,
             "scan {scan}: {e:?}"
         );
-        m.positions.iter().filter(|p| p[0].abs() < 0.105 && p[1].abs() < 0.1485).count()
+        // The surface over the pyramid's base: the share of its 5 mm cells that hold a point
+        // (a lost frame, 2.3 mm of travel, leaves none empty; a lost camera or a broken grid
+        // does), and the points there.
+        const CELL: f64 = 0.005;
+        let cell = |v: f32| (f64::from(v) / CELL).floor() as i32;
+        let inside = |i: i32, j: i32| {
+            ((f64::from(i) + 0.5) * CELL).abs() < 0.105 && ((f64::from(j) + 0.5) * CELL).abs() < 0.1485
+        };
+        let over: Vec<&[f32; 3]> = m.positions.iter().filter(|p| p[0].abs() < 0.105 && p[1].abs() < 0.1485).collect();
+        let covered: std::collections::HashSet<(i32, i32)> =
+            over.iter().map(|p| (cell(p[0]), cell(p[1]))).filter(|&(i, j)| inside(i, j)).collect();
+        let cells = (-30..30).flat_map(|i| (-40..40).map(move |j| (i, j))).filter(|&(i, j)| inside(i, j)).count();
+        (covered.len() as f64 / cells as f64, over.len())
     };
-    let clean = over_base(1);
-    assert!(clean > 5_000, "{clean}");
+    let (clean_cover, clean) = over_base(1);
+    assert!(clean > 5_000 && clean_cover > 0.97, "{clean} points, {clean_cover} covered");
     for k in 2..=rounds + 1 {
-        let n = over_base(k);
+        let (cover, n) = over_base(k);
         let r = n as f64 / clean as f64;
-        eprintln!("scan {k}: {n} points over the base, {r:.4} of the clean scan's {clean}");
-        assert!((r - 1.0).abs() <= 0.01, "scan {k}: {n} points over the base, the clean scan {clean}");
+        eprintln!(
+            "scan {k}: {:.2} % of the base covered ({:.2} % clean), {n} points there, {r:.4} of the clean scan's {clean}",
+            100.0 * cover,
+            100.0 * clean_cover
+        );
+        // Equal within 1 %: the surface (its coverage of the base); the point count within 3 %,
+        // since a loaded machine's cameras skip a frame or two of a scan's 130 (counted below).
+        assert!(
+            (cover - clean_cover).abs() <= 0.01,
+            "scan {k}: {cover} of the base covered, the clean scan {clean_cover}"
+        );
+        assert!((r - 1.0).abs() <= 0.03, "scan {k}: {n} points over the base, the clean scan {clean}");
         let report: serde_json::Value =
             serde_json::from_slice(&std::fs::read(files.join(format!("scan_{k}/scan_report.json"))).unwrap()).unwrap();
         assert_eq!(report["merged"], serde_json::json!(["cam1", "cam2"]), "scan {k}: {report}");
+        // The malformed messages came before the scan: none of its frames was refused.
+        for c in report["cameras"].as_array().unwrap() {
+            assert_eq!(c["frames_refused_upstream"], 0, "scan {k}: {c}");
+            assert_eq!(c["profiles_refused"], 0, "scan {k}: {c}");
+        }
     }
     std::fs::remove_dir_all(&out).unwrap();
 }

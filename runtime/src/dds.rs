@@ -476,11 +476,25 @@ pub fn create_node(
     }));
     opts = opts.parameter_set_action(Box::new(move |name, value| {
         if let (Some(v), Some(tx)) = (from_ros(value), tx.as_ref()) {
-            if let Ok(mut p) = shared.lock() {
-                // Validated just before by the validator; keep the store in step for the next one.
-                let _ = p.set(&set_decls, name, v.clone());
+            let changed = match shared.lock() {
+                Ok(mut p) => {
+                    // ros2-client sets every declared parameter once at start-up, to the value
+                    // it already has: that is no reconfiguration (a node rebuilt per parameter).
+                    let current = |p: &Params| {
+                        p.get(name)
+                            .cloned()
+                            .or_else(|| set_decls.iter().find(|d| d.name == name).map(|d| d.default.clone()))
+                    };
+                    let before = current(&p);
+                    // Validated just before by the validator; keep the store in step for the next one.
+                    let _ = p.set(&set_decls, name, v.clone());
+                    before != current(&p)
+                }
+                Err(_) => true,
+            };
+            if changed {
+                let _ = tx.try_send((name.to_string(), v));
             }
-            let _ = tx.try_send((name.to_string(), v));
         }
         Ok(())
     }));

@@ -27,13 +27,14 @@ struct Stamps {
 
 impl Stamps {
     /// A frame at `stamp`; `start`: the running scan's START stamp (a frame stamped before it
-    /// is none of the scan's).
-    fn push(&mut self, stamp: i64, message: Option<&str>, start: Option<i64>) {
+    /// is none of the scan's); `between`: no scan runs or awaits its report (only the last
+    /// [`BETWEEN_SCANS`] are kept).
+    fn push(&mut self, stamp: i64, message: Option<&str>, start: Option<i64>, between: bool) {
         if start.is_some_and(|s| stamp < s) {
             return;
         }
         self.stamps.push_back(stamp);
-        if start.is_none() && self.stamps.len() > BETWEEN_SCANS {
+        if between && self.stamps.len() > BETWEEN_SCANS {
             self.stamps.pop_front();
         }
         if let Some(m) = message.filter(|_| self.first.len() < 4) {
@@ -139,14 +140,17 @@ impl ScanTally {
     fn start(&self) -> Option<i64> {
         self.scan.map(|(_, s)| s)
     }
+    fn between(&self) -> bool {
+        self.scan.is_none() && self.ending.is_none()
+    }
     /// A frame at `stamp` done (sent, taken, placed).
     pub(crate) fn count(&mut self, stamp: i64) {
-        self.counted.push(stamp, None, self.start());
+        self.counted.push(stamp, None, self.start(), self.between());
     }
     /// `n` frame slots at `stamp` that were never made (a camera behind its rate).
     pub(crate) fn skip(&mut self, stamp: i64, n: u64) {
         for _ in 0..n.min(1 << 16) {
-            self.skipped.push(stamp, None, self.start());
+            self.skipped.push(stamp, None, self.start(), self.between());
         }
     }
     /// A frame at `stamp` refused for `why` (a short class: `image`, `line`); `message` is the
@@ -155,8 +159,8 @@ impl ScanTally {
         if !self.refused.contains_key(why) && self.refused.len() >= MAX_REASONS {
             return;
         }
-        let start = self.start();
-        self.refused.entry(why).or_default().push(stamp, Some(message), start);
+        let (start, between) = (self.start(), self.between());
+        self.refused.entry(why).or_default().push(stamp, Some(message), start, between);
     }
 }
 
@@ -187,6 +191,9 @@ mod tests {
         t.count(21 * s); // after the END stamp, counted before END arrived
         assert!(t.event(&event(ScanEvent::END, 4, 20), "camera_driver", "cam1", "frames_sent").is_none());
         t.count(19 * s); // exposed in the scan, arriving after its END
+        for _ in 0..2 * BETWEEN_SCANS {
+            t.count(21 * s); // the next scan's, before its START: none of this one's frames go
+        }
         assert!(t.due(20 * s + GRACE_NS - 1).is_none(), "the report waits for the late frames");
         let Some(Msg::Text(r)) = t.due(20 * s + GRACE_NS) else { panic!("a report after END") };
         let r: serde_json::Value = serde_json::from_str(&r.data).unwrap();
