@@ -96,7 +96,9 @@ def main(bin_dir, launch, params, mode, seconds, files, out, warmup="60"):
         if len(after) >= 2:
             memory[name] = {"rss_after_warmup_mib": round(after[0] / 2**20, 1), "rss_end_mib": round(after[-1] / 2**20, 1),
                             "rss_max_mib": round(max(after) / 2**20, 1),
-                            "growth_percent": round(100 * (after[-1] - after[0]) / after[0], 1)}
+                            "growth_percent": round(100 * (after[-1] - after[0]) / after[0], 1),
+                            # One sample a minute, to tell growth from a plateau.
+                            "rss_by_minute_mib": [round(r / 2**20) for t, r in s if int(t) % 60 < 5]}
     print(json.dumps({"mode": mode, "seconds": seconds, "launcher_exit": exit_code, "scans_asked": asked,
                       "scans_reported": sum((files / f"scan_{k}" / "scan_report.json").is_file() for k in range(1, last_asked_for + 1)),
                       "surfaces_written": written, "cameras_incomplete": incomplete, "cameras_missing": missing,

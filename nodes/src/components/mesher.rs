@@ -198,7 +198,8 @@ struct ScanAccount {
     start_ns: Option<i64>,
     first_ns: Option<i64>,
     last_ns: Option<i64>,
-    received: u64,
+    /// The stamps of the frames received.
+    received: Vec<i64>,
     without_line: u64,
     refused: u64,
     /// `(stamp before, stamp after, frames missing between)`.
@@ -213,6 +214,9 @@ impl ScanAccount {
     /// margins to START and END are given in seconds and not counted.
     fn report(&self, scan_id: u32, camera: &str, aborted: bool, end_ns: Option<i64>, period_ns: Option<i64>) -> String {
         let lost: u64 = self.gaps.iter().map(|g| u64::from(g.2)).sum();
+        // A frame stamped after END that arrived before the END event did is in the grid (it
+        // is of the object) but not of the scan's count, as the other nodes count.
+        let received = self.received.iter().filter(|&&t| end_ns.is_none_or(|e| t < e)).count() as u64;
         let margin = |a: Option<i64>, b: Option<i64>| a.zip(b).map(|(a, b)| (b - a) as f64 * 1e-9);
         let t = |ns: Option<i64>| ns.map(convert::fmt_stamp);
         serde_json::json!({
@@ -225,8 +229,8 @@ impl ScanAccount {
             "first_frame": t(self.first_ns),
             "last_frame": t(self.last_ns),
             "frame_period_s": period_ns.map(|p| p as f64 * 1e-9),
-            "frames_expected": self.received + lost,
-            "frames_received": self.received,
+            "frames_expected": received + lost,
+            "frames_received": received,
             "frames_lost": lost,
             "first_frame_after_start_s": margin(self.start_ns, self.first_ns),
             "last_frame_before_end_s": margin(self.last_ns, end_ns),
@@ -360,7 +364,7 @@ impl MesherNode {
         })?;
         self.frames += 1;
         let a = &mut self.account;
-        a.received += 1;
+        a.received.push(stamp);
         a.without_line += u64::from(p.valid() == 0);
         a.first_ns = Some(a.first_ns.map_or(stamp, |f| f.min(stamp)));
         a.last_ns = Some(a.last_ns.map_or(stamp, |l| l.max(stamp)));
