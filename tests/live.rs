@@ -235,8 +235,8 @@ fn a_killed_triangulator_is_respawned_and_the_scan_says_what_it_lost() {
 /// camera's grid, bad profiles and clouds, bad scan events, requests and reports), then asks for a
 /// clean scan; ten times over. Every process stays up (no exit, no respawn), every refusal is
 /// counted, and each scan's merged surface equals the clean first scan's within 1 % (its
-/// coverage of the pyramid's base; the points there within 3 %) and meets the live accuracy
-/// bounds against the true pyramid.
+/// coverage of the pyramid's base; the points there per frame taken within 2 %) and meets the
+/// live accuracy bounds against the true pyramid.
 #[test]
 fn malformed_messages_from_a_dds_peer_cost_only_themselves() {
     let Some(py) = python() else { return };
@@ -316,28 +316,43 @@ fn malformed_messages_from_a_dds_peer_cost_only_themselves() {
         let cells = (-30..30).flat_map(|i| (-40..40).map(move |j| (i, j))).filter(|&(i, j)| inside(i, j)).count();
         (covered.len() as f64 / cells as f64, over.len())
     };
+    // The frames the mesher took in a scan (both cameras): a loaded machine's cameras skip or
+    // lose a few of a scan's 130, counted in the report, and the points follow them.
+    let report = |k: usize| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(files.join(format!("scan_{k}/scan_report.json"))).unwrap()).unwrap()
+    };
+    let frames = |r: &serde_json::Value| -> u64 {
+        r["cameras"].as_array().unwrap().iter().map(|c| c["frames_received"].as_u64().unwrap()).sum()
+    };
     let (clean_cover, clean) = over_base(1);
+    let clean_frames = frames(&report(1));
     assert!(clean > 5_000 && clean_cover > 0.97, "{clean} points, {clean_cover} covered");
     for k in 2..=rounds + 1 {
         let (cover, n) = over_base(k);
-        let r = n as f64 / clean as f64;
+        let r = report(k);
+        let f = frames(&r);
+        // Points per frame taken, against the clean scan's.
+        let density = (n as f64 / f as f64) / (clean as f64 / clean_frames as f64);
         eprintln!(
-            "scan {k}: {:.2} % of the base covered ({:.2} % clean), {n} points there, {r:.4} of the clean scan's {clean}",
+            "scan {k}: {:.2} % of the base covered ({:.2} % clean), {n} points there ({clean} clean), {f} frames ({clean_frames} clean), points per frame {density:.4} of the clean scan's",
             100.0 * cover,
             100.0 * clean_cover
         );
-        // Equal within 1 %: the surface (its coverage of the base); the point count within 3 %,
-        // since a loaded machine's cameras skip a frame or two of a scan's 130 (counted below).
+        // Equal within 1 %: the surface (its coverage of the base); the points per frame taken
+        // within 2 % (half of a scan's frames see the table only, so a frame lost there moves
+        // the figure without a point lost over the base); a lost camera or a broken grid fails
+        // both by far.
         assert!(
             (cover - clean_cover).abs() <= 0.01,
             "scan {k}: {cover} of the base covered, the clean scan {clean_cover}"
         );
-        assert!((r - 1.0).abs() <= 0.03, "scan {k}: {n} points over the base, the clean scan {clean}");
-        let report: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(files.join(format!("scan_{k}/scan_report.json"))).unwrap()).unwrap();
-        assert_eq!(report["merged"], serde_json::json!(["cam1", "cam2"]), "scan {k}: {report}");
+        assert!(
+            (density - 1.0).abs() <= 0.01,
+            "scan {k}: {n} points from {f} frames, the clean scan {clean} from {clean_frames}"
+        );
+        assert_eq!(r["merged"], serde_json::json!(["cam1", "cam2"]), "scan {k}: {r}");
         // The malformed messages came before the scan: none of its frames was refused.
-        for c in report["cameras"].as_array().unwrap() {
+        for c in r["cameras"].as_array().unwrap() {
             assert_eq!(c["frames_refused_upstream"], 0, "scan {k}: {c}");
             assert_eq!(c["profiles_refused"], 0, "scan {k}: {c}");
         }
