@@ -2,8 +2,9 @@
 //! runs) and its mesh (`mesh`, at END), plus `<output_dir>/scan_<id>/<cam>.ply`.
 //!
 //! Scans are bounded by `/scan/events` from whoever publishes them: frames outside START..END
-//! belong to no scan (counted; a frame stamped before START that arrives after it as well). A source without events (a bag of one scan) gives scan 0, from
-//! the first frame with points. Gaps in the frame stamps are counted as dropped frames, logged, and kept as
+//! belong to no scan (counted; a frame stamped before START that arrives after it as well). A
+//! source without events (a bag of one scan) gives scan 0, from the first frame with points.
+//! Gaps in the frame stamps are counted as dropped frames, logged, and kept as
 //! empty grid columns so the mesh does not bridge them (a single missing frame is filled).
 
 use super::decl;

@@ -1,6 +1,7 @@
-//! A per-camera node's account of one scan, published on `/scan/report` at its END or ABORT
-//! next to the mesher's: what the node did with the frames stamped in the scan (sent by the
-//! camera_driver; refused by the edge_detector or triangulator, and why). The merger puts them
+//! A per-camera node's account of one scan, published on `/scan/report` 0.3 s after its END or
+//! ABORT (or at the next START), next to the mesher's: what the node did with the frames
+//! stamped in the scan (sent by the camera_driver; refused by the edge_detector or
+//! triangulator, and why). The merger puts them
 //! under the camera's report, so that a frame the mesher did not get is told apart: refused on
 //! the way (and why), never sent (a camera behind its frame rate), or lost in transport.
 
