@@ -6,8 +6,9 @@ new scan (START on /scan/request, from this Cyclone DDS peer) as soon as the mer
 the last one: back-to-back scans. Every 5 s it samples each process's resident memory (VmRSS).
 At the end it stops the launcher with SIGTERM and reads every scan's scan_report.json.
 Prints one JSON line: scans asked and written, frames sent / received / lost (in transport,
-refused, never sent) summed over scans and cameras, and per process the resident memory after
-the warm-up (the first WARMUP s) and at the end, and its growth.
+refused, never sent) summed over scans and cameras, and per process the largest resident memory
+of each minute, and its growth from the first minute after the warm-up (the first WARMUP s) to
+the last.
 usage: soak.py BIN_DIR LAUNCH PARAMS MODE SECONDS FILES OUT [WARMUP]
 """
 import json
@@ -90,15 +91,22 @@ def main(bin_dir, launch, params, mode, seconds, files, out, warmup="60"):
         for c in r["cameras"]:
             for key in totals:
                 totals[key] += c.get(key) or 0
+    # Within a minute the memory rises and falls with each scan's surface, so the growth is
+    # measured between the largest samples of the first minute after the warm-up and of the last
+    # minute.
     memory = {}
     for name, s in sorted(samples.items()):
-        after = [r for t, r in s if t >= warmup]
+        minutes = {}
+        for t, r in s:
+            minutes.setdefault(int(t // 60), []).append((t, r))
+        by_minute = [max(r for _, r in minutes[m]) for m in sorted(minutes)]
+        after = [max(r for _, r in minutes[m]) for m in sorted(minutes) if m * 60 >= warmup]
         if len(after) >= 2:
-            memory[name] = {"rss_after_warmup_mib": round(after[0] / 2**20, 1), "rss_end_mib": round(after[-1] / 2**20, 1),
+            memory[name] = {"rss_max_first_minute_after_warmup_mib": round(after[0] / 2**20, 1),
+                            "rss_max_last_minute_mib": round(after[-1] / 2**20, 1),
                             "rss_max_mib": round(max(after) / 2**20, 1),
                             "growth_percent": round(100 * (after[-1] - after[0]) / after[0], 1),
-                            # One sample a minute, to tell growth from a plateau.
-                            "rss_by_minute_mib": [round(r / 2**20) for t, r in s if int(t) % 60 < 5]}
+                            "rss_max_by_minute_mib": [round(r / 2**20) for r in by_minute]}
     print(json.dumps({"mode": mode, "seconds": seconds, "launcher_exit": exit_code, "scans_asked": asked,
                       "scans_reported": sum((files / f"scan_{k}" / "scan_report.json").is_file() for k in range(1, last_asked_for + 1)),
                       "surfaces_written": written, "cameras_incomplete": incomplete, "cameras_missing": missing,

@@ -96,6 +96,13 @@ impl PoseTrack {
             self.samples.pop_front();
         }
     }
+    /// Drops the samples stamped before `stamp_ns` (keeping the last one before it, so that a
+    /// stamp at `stamp_ns` still interpolates).
+    pub fn forget_before(&mut self, stamp_ns: i64) {
+        while self.samples.len() > 2 && self.samples.get(1).is_some_and(|s| s.0 <= stamp_ns) {
+            self.samples.pop_front();
+        }
+    }
     /// Number of samples held.
     pub fn len(&self) -> usize {
         self.samples.len()
@@ -182,6 +189,20 @@ pub fn slerp(a: Quat, b: Quat, t: f64) -> Quat {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn forgetting_keeps_what_interpolates_the_stamp() {
+        let mut t = PoseTrack::default();
+        for k in 0..10 {
+            t.push(k * 10_000_000, &table_from_carm(0.001 * k as f64, 0.0, 0.0));
+        }
+        t.forget_before(45_000_000);
+        assert_eq!(t.len(), 6, "40 ms (the last before 45 ms) and the five after it");
+        assert!((t.at(45_000_000).unwrap().translation.y - 0.0045).abs() < 1e-12);
+        assert!(t.at(30_000_000).is_err(), "forgotten");
+        t.forget_before(i64::MAX);
+        assert_eq!(t.len(), 2, "the last two are always kept");
+    }
 
     #[test]
     fn prediction_is_exact_at_constant_speed_and_bounded() {

@@ -172,7 +172,7 @@ fn class_of(topic: &str, type_name: &str) -> QosClass {
 fn bag_qos(c: QosClass) -> Qos {
     match c {
         QosClass::Sensor => Qos::SENSOR,
-        QosClass::Reliable => Qos::RELIABLE,
+        QosClass::Reliable | QosClass::State => Qos::RELIABLE,
         QosClass::Static => Qos::STATIC,
     }
 }

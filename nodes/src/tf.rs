@@ -62,6 +62,11 @@ impl TfBuffer {
         }
         refusal(refused, m.transforms.len())
     }
+    /// Forgets the `table -> carm` poses stamped before `stamp_ns` (see
+    /// [`PoseTrack::forget_before`]).
+    pub fn forget_before(&mut self, stamp_ns: i64) {
+        self.track.forget_before(stamp_ns);
+    }
     /// The newest `table -> carm` stamp.
     pub fn latest_pose_stamp(&self) -> Option<i64> {
         self.track.latest_stamp()

@@ -119,8 +119,13 @@ msg_types! {
 pub enum QosClass {
     /// Camera streams: best effort, depth 5.
     Sensor,
-    /// Clouds, meshes, lines, events, `/tf`: reliable, depth 10.
+    /// Lines, profiles, events, reports, `/tf`: reliable, depth 10.
     Reliable,
+    /// The latest state of a surface, each message superseding the one before (a camera's grid
+    /// so far and its mesh, the merged surface, the radiograph's overlay): reliable, depth 1.
+    /// These are the largest messages (tens of MB at 1920x1200); a deeper history would hold
+    /// that many copies in every writer.
+    State,
     /// `/tf_static`: reliable, transient local, depth 1.
     Static,
 }

@@ -112,6 +112,9 @@ pub fn qos(class: QosClass) -> QosProfile {
         QosClass::Reliable => {
             base.reliability(reliable).history(History::KeepLast { depth: 10 }).durability(Durability::Volatile)
         }
+        QosClass::State => {
+            base.reliability(reliable).history(History::KeepLast { depth: 1 }).durability(Durability::Volatile)
+        }
         QosClass::Static => {
             base.reliability(reliable).history(History::KeepLast { depth: 1 }).durability(Durability::TransientLocal)
         }
@@ -519,13 +522,25 @@ pub fn host_declarations() -> Vec<ParamDecl> {
             "qos.reliable.reliability",
             ParamValue::String("reliable".into()),
             "",
-            "clouds, meshes, lines, events, /tf: reliable or best_effort (read at start-up)",
+            "lines, profiles, events, reports, /tf: reliable or best_effort (read at start-up)",
         ),
         d(
             "qos.reliable.depth",
             ParamValue::Integer(10),
             "messages",
-            "clouds, meshes, lines, events, /tf: history depth (read at start-up)",
+            "lines, profiles, events, reports, /tf: history depth (read at start-up)",
+        ),
+        d(
+            "qos.state.reliability",
+            ParamValue::String("reliable".into()),
+            "",
+            "clouds, meshes, overlay (each supersedes the last): reliable or best_effort (read at start-up)",
+        ),
+        d(
+            "qos.state.depth",
+            ParamValue::Integer(1),
+            "messages",
+            "clouds, meshes, overlay: history depth (read at start-up)",
         ),
     ]
 }
@@ -535,6 +550,7 @@ pub fn host_declarations() -> Vec<ParamDecl> {
 pub struct QosTable {
     sensor: QosProfile,
     reliable: QosProfile,
+    state: QosProfile,
 }
 
 impl QosTable {
@@ -564,6 +580,7 @@ impl QosTable {
         Ok(QosTable {
             sensor: class("qos.sensor", qos(QosClass::Sensor))?,
             reliable: class("qos.reliable", qos(QosClass::Reliable))?,
+            state: class("qos.state", qos(QosClass::State))?,
         })
     }
     /// The profile of a class.
@@ -571,6 +588,7 @@ impl QosTable {
         match c {
             QosClass::Sensor => self.sensor.clone(),
             QosClass::Reliable => self.reliable.clone(),
+            QosClass::State => self.state.clone(),
             QosClass::Static => qos(QosClass::Static),
         }
     }

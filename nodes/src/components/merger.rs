@@ -738,10 +738,10 @@ impl Component for MergerNode {
             .cfg
             .cameras
             .iter()
-            .map(|c| Port::new(&format!("/{c}/cloud"), PointCloud2::TYPE_NAME, QosClass::Reliable))
+            .map(|c| Port::new(&format!("/{c}/cloud"), PointCloud2::TYPE_NAME, QosClass::State))
             .collect();
         v.push(Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable));
-        v.push(Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::Reliable));
+        v.push(Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::State));
         v.push(Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable));
         v.push(Port::new("/tf_static", TFMessage::TYPE_NAME, QosClass::Static));
         v.extend(
@@ -755,8 +755,8 @@ impl Component for MergerNode {
     }
     fn outputs(&self) -> Vec<Port> {
         vec![
-            Port::new("/surface/cloud", PointCloud2::TYPE_NAME, QosClass::Reliable),
-            Port::new("/surface/mesh", Marker::TYPE_NAME, QosClass::Reliable),
+            Port::new("/surface/cloud", PointCloud2::TYPE_NAME, QosClass::State),
+            Port::new("/surface/mesh", Marker::TYPE_NAME, QosClass::State),
             Port::new("/surface/placements", TFMessage::TYPE_NAME, QosClass::Reliable),
         ]
     }

@@ -447,8 +447,8 @@ impl Component for MesherNode {
     }
     fn outputs(&self) -> Vec<Port> {
         vec![
-            Port::new("cloud", PointCloud2::TYPE_NAME, QosClass::Reliable),
-            Port::new("mesh", Marker::TYPE_NAME, QosClass::Reliable),
+            Port::new("cloud", PointCloud2::TYPE_NAME, QosClass::State),
+            Port::new("mesh", Marker::TYPE_NAME, QosClass::State),
             Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
         ]
     }

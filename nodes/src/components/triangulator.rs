@@ -147,6 +147,10 @@ pub struct TriangulatorNode {
     tally: super::tally::ScanTally,
 }
 
+/// How long C-arm poses are kept, as tf2's buffer keeps 10 s: a line older than the newest pose
+/// by more than this is placed by no pose (and counted), and the memory stays flat however long
+/// the node runs.
+const TF_CACHE_NS: i64 = 10_000_000_000;
 const IN_LINE: usize = 0;
 const IN_INFO: usize = 1;
 const IN_TF: usize = 2;
@@ -302,6 +306,9 @@ impl Component for TriangulatorNode {
             }
             (IN_TF, Msg::Tf(t)) => {
                 let added = self.tf.add_dynamic(t);
+                if let Some(latest) = self.tf.latest_pose_stamp() {
+                    self.tf.forget_before(latest.saturating_sub(TF_CACHE_NS));
+                }
                 self.drain(out, false);
                 added.map_err(NodeError::new)
             }

@@ -505,7 +505,7 @@ impl Component for XrayAlignerNode {
         if !self.cfg.from_topic {
             v.push(Port::new("/xray/image", Image::TYPE_NAME, QosClass::Reliable));
         }
-        v.push(Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::Reliable));
+        v.push(Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::State));
         v
     }
     fn declarations(&self) -> Vec<ParamDecl> {
@@ -536,6 +536,11 @@ impl Component for XrayAlignerNode {
                 let stamp = e.header.stamp.nanos();
                 match e.event {
                     ScanEvent::START => {
+                        // The poses of the scan before this one are kept (its radiograph may
+                        // still come, timed by its DICOM); older ones are forgotten.
+                        if let Some(previous) = self.scan.map(|s| s.start_ns) {
+                            self.tf.forget_before(previous.min(stamp));
+                        }
                         self.scan = Some(ScanWindow { id: e.scan_id, start_ns: stamp, end_ns: None });
                         self.end_seen_ns = None;
                     }
