@@ -41,6 +41,18 @@ def rss(pid):
     return None
 
 
+def trend(samples):
+    """The least-squares slope of (t, rss) samples, as % of their mean per 600 s."""
+    n = len(samples)
+    if n < 3:
+        return None
+    mt = sum(t for t, _ in samples) / n
+    mr = sum(r for _, r in samples) / n
+    var = sum((t - mt) ** 2 for t, _ in samples)
+    slope = sum((t - mt) * (r - mr) for t, r in samples) / var if var > 0 else 0.0
+    return round(100 * slope * 600 / mr, 1)
+
+
 def main(bin_dir, launch, params, mode, seconds, files, out, warmup="60"):
     seconds, warmup, files, out = float(seconds), float(warmup), pathlib.Path(files), pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -79,12 +91,15 @@ def main(bin_dir, launch, params, mode, seconds, files, out, warmup="60"):
         exit_code = "killed"
     totals = {"frames_sent": 0, "frames_received": 0, "frames_lost": 0, "frames_lost_in_transport": 0,
               "frames_refused_upstream": 0, "frames_not_sent": 0}
-    written, incomplete, missing = 0, 0, 0
+    written, incomplete, missing, cut = 0, 0, 0, 0
     for k in range(1, last_asked_for + 1):
         f = files / f"scan_{k}" / "scan_report.json"
         if not f.is_file():
             continue
         r = json.loads(f.read_text())
+        if any(c.get("end") is None for c in r["cameras"]):
+            cut += 1  # the scan the stop interrupted (merged at shutdown): not in the totals
+            continue
         written += (files / f"scan_{k}" / "merged.ply").is_file()
         incomplete += len(r["incomplete"])
         missing += len(r["missing"])
@@ -106,10 +121,12 @@ def main(bin_dir, launch, params, mode, seconds, files, out, warmup="60"):
                             "rss_max_last_minute_mib": round(after[-1] / 2**20, 1),
                             "rss_max_mib": round(max(after) / 2**20, 1),
                             "growth_percent": round(100 * (after[-1] - after[0]) / after[0], 1),
-                            "rss_max_by_minute_mib": [round(r / 2**20) for r in by_minute]}
+                            "rss_max_by_minute_mib": [round(r / 2**20) for r in by_minute],
+                            # Least-squares trend of every sample after the warm-up, % per 10 min.
+                            "trend_percent_per_10_min": trend([(t, r) for t, r in s if t >= warmup])}
     print(json.dumps({"mode": mode, "seconds": seconds, "launcher_exit": exit_code, "scans_asked": asked,
                       "scans_reported": sum((files / f"scan_{k}" / "scan_report.json").is_file() for k in range(1, last_asked_for + 1)),
-                      "surfaces_written": written, "cameras_incomplete": incomplete, "cameras_missing": missing,
+                      "surfaces_written": written, "scans_cut_by_the_stop": cut, "cameras_incomplete": incomplete, "cameras_missing": missing,
                       **totals, "memory": memory}))
 
 

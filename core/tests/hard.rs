@@ -271,3 +271,63 @@ fn report() {
     }
     scan("phantom", (640, 480), Encoding::Mono8, 0.070, Method::Gradient);
 }
+
+/// Debug aid: rows where the true line lies on the dark print (4 mm inside its edges) and the
+/// detector found nothing there (or something else): the row's samples around the true column.
+#[test]
+#[ignore]
+fn probe_dark_misses() {
+    let scene = std::env::var("SCENE").unwrap_or("phantom".into());
+    let w: u32 = std::env::var("W").map_or(640, |v| v.parse().unwrap());
+    let enc = if std::env::var("RGB").is_ok() { Encoding::Rgb8 } else { Encoding::Mono8 };
+    let cam: usize = std::env::var("CAM").map_or(0, |v| v.parse().unwrap());
+    let limit: usize = std::env::var("LIMIT").map_or(40, |v| v.parse().unwrap());
+    let h = w * 3 / 4;
+    let rig = Rig::study(w, h);
+    let mut settings = ScanSettings { encoding: enc, ..Default::default() };
+    Preset::Hard.apply(&mut settings);
+    let s = Scanner::new(Scene::by_name(&scene).unwrap(), rig.clone(), Preset::Hard.laser(), settings).unwrap();
+    let geo = rig.cameras[cam].geometry().unwrap();
+    let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
+    let mut line = LaserLine::default();
+    let (mut shown, mut missed, mut total) = (0, 0, 0);
+    for f in 0..s.frame_count() {
+        let band: Vec<Vec3> =
+            s.observable_points(cam, f, 15.0).into_iter().filter(|p| s.scene.in_band(*p, BAND_EDGE_M)).collect();
+        if band.is_empty() {
+            continue;
+        }
+        let ft = s.frame_time(f);
+        let img = s.render(cam, f);
+        det.detect(&img.view().unwrap(), &mut line).unwrap();
+        let optical_from_table = xsurf_core::pose::table_from_carm(ft.travel_m, 0.0, 0.0)
+            .compose(&geo.carm_from_optical)
+            .inverse();
+        let mut rows = std::collections::BTreeMap::new();
+        for p in band {
+            if let Some((u, v)) = geo.model.project(optical_from_table.transform_point(p)) {
+                rows.entry(v.round() as i64).or_insert(u);
+            }
+        }
+        for (v, u) in rows {
+            if v < 0 || v >= h as i64 {
+                continue;
+            }
+            total += 1;
+            let found = line.u[v as usize];
+            if found.is_finite() && (f64::from(found) - u).abs() < 2.0 {
+                continue;
+            }
+            missed += 1;
+            if shown < limit {
+                shown += 1;
+                let row = img.view().unwrap();
+                let x0 = (u as i64 - 14).max(0) as u32;
+                let x1 = (u as i64 + 15).min(i64::from(w)) as u32;
+                let vals: Vec<u8> = (x0..x1).map(|x| row.rgb_at(x, v as u32)[0]).collect();
+                eprintln!("frame {f} row {v}: true u {u:.1}, found {found:.1}; from x {x0}: {vals:?}");
+            }
+        }
+    }
+    eprintln!("{missed} of {total} dark-print rows missed");
+}
