@@ -17,10 +17,8 @@ pub(super) trait Sample: Copy + PartialOrd {
     fn weighted(s: &[Self]) -> (f64, f64);
     /// Index of the first maximum of `p` (`None` if empty).
     fn argmax(p: &[Self]) -> Option<usize>;
-    /// The peak contrast of every sample: how far it stands above the higher of the darkest
-    /// sample within `d` before it and the darkest within `d` after it (zero within `d` of
-    /// either end, and never negative), into `out`. A dim line in a dark stripe a pixel or two
-    /// wide, beside brighter surfaces, stands out by it.
+    /// The peak contrast of every sample: how far it stands above the higher of the samples
+    /// `d` before and after it (zero within `d` of either end, and never negative), into `out`.
     fn contrast(p: &[Self], d: usize, out: &mut Vec<Self>);
     /// The run of samples above `cut` on either side of `m`, at most `reach` samples each way
     /// and inside `p`: `(first, last)`. `p[m]` itself is not compared.
@@ -65,10 +63,11 @@ impl Sample for u8 {
     fn contrast(p: &[u8], d: usize, out: &mut Vec<u8>) {
         out.clear();
         out.resize(p.len(), 0);
-        for i in d..p.len().saturating_sub(d) {
-            let l = p[i - d..i].iter().copied().min().unwrap_or(0);
-            let r = p[i + 1..=i + d].iter().copied().min().unwrap_or(0);
-            out[i] = p[i].saturating_sub(l.max(r));
+        if p.len() > 2 * d {
+            let (a, mid, b) = (&p[..p.len() - 2 * d], &p[d..p.len() - d], &p[2 * d..]);
+            for (((o, &v), &l), &r) in out[d..p.len() - d].iter_mut().zip(mid).zip(a).zip(b) {
+                *o = v.saturating_sub(l.max(r));
+            }
         }
     }
     type Cut = i32;
@@ -187,9 +186,7 @@ impl Sample for f32 {
         out.clear();
         out.resize(p.len(), 0.0);
         for i in d..p.len().saturating_sub(d) {
-            let l = p[i - d..i].iter().copied().fold(f32::INFINITY, f32::min);
-            let r = p[i + 1..=i + d].iter().copied().fold(f32::INFINITY, f32::min);
-            out[i] = (p[i] - l.max(r)).max(0.0);
+            out[i] = (p[i] - p[i - d].max(p[i + d])).max(0.0);
         }
     }
     type Cut = f32;

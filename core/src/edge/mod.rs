@@ -471,7 +471,6 @@ fn find_peak<S: Sample>(
     cfg: &EdgeConfig,
     scale: f32,
     saturation: f32,
-    valley_width: Option<f32>,
 ) -> Result<Peak, (usize, usize)> {
     let n = p.len();
     let peak = p[m].f();
@@ -497,7 +496,7 @@ fn find_peak<S: Sample>(
     };
     // With the first flanks, the first pass's run is the half-maximum run.
     let known = (gap == gap0).then_some((lo, hi));
-    let first = match judge(p, m, &f, known, cfg, (scale, saturation), run) {
+    match judge(p, m, &f, known, cfg, (scale, saturation), run) {
         // A line a pixel or two wide, clearly above its near samples, that fails with flanks
         // `gap0` out may lie in a narrow dark stripe between brighter surfaces: its background
         // is right beside it, GAP_PER_WIDTH times its width out.
@@ -516,60 +515,7 @@ fn find_peak<S: Sample>(
             }
         }
         other => other,
-    };
-    // A line a few pixels from a brighter surface (a dim line on dark print beside bright
-    // cloth or skin, its flanks reaching onto the bright side): its background is the valley
-    // between the two, right beside the line. Only for a peak no wider than `valley_width`
-    // (from the line's typical width): a broad highlight has valleys too.
-    first.or_else(|e| {
-        let Some(max_width) = valley_width else { return Err(e) };
-        let f = valleys(p, (lo, m, hi), max_hw, (flank, gap0)).map_err(|_| e)?;
-        if peak - f.left.0.max(f.right.0) < NARROW_RETRY * cfg.min_strength * scale {
-            return Err(e);
-        }
-        judge(p, m, &f, None, cfg, (scale, saturation), run).ok().filter(|pk| pk.width <= max_width).ok_or(e)
-    })
-}
-
-/// The background of the line at `m` (half-maximum run `lo..=hi`) as the valley floor on each
-/// side: the darkest sample within `2 * half-width + 3` of the peak outside the run (none
-/// where either side is the profile's edge), with the noise of the quieter of the two ordinary
-/// flanks (`flank` samples each, `gap0` from the peak).
-fn valleys<S: Sample>(
-    p: &[S],
-    (lo, m, hi): (usize, usize, usize),
-    max_hw: usize,
-    (flank, gap0): (usize, usize),
-) -> Result<Flanks, (usize, usize)> {
-    let hw = (m - lo).max(hi - m);
-    let reach = (2 * hw + 3).min(max_hw.max(3));
-    let refuse = Err((lo.saturating_sub(1), hi + 1));
-    if lo < 2 || hi + 2 >= p.len() {
-        return refuse;
     }
-    let darkest = |r: std::ops::Range<usize>| {
-        r.map(|i| (i, p[i].f())).min_by(|a, b| a.1.total_cmp(&b.1)).map(|(i, v)| (v, i as f32))
-    };
-    let (Some(left), Some(right)) =
-        (darkest(m.saturating_sub(reach)..lo), darkest(hi + 1..(m + reach + 1).min(p.len())))
-    else {
-        return refuse;
-    };
-    // Each ordinary flank's own noise, about its own mean; the quieter one is the sensor's.
-    let noise = |start: usize, end: usize| {
-        (end >= start + 2).then(|| {
-            let sd = side(p, start, end);
-            (sd.ss.max(0.0) / sd.count as f32).sqrt()
-        })
-    };
-    let l_end = m.saturating_sub(gap0);
-    let r_start = m + gap0 + 1;
-    let noise = match (noise(l_end.saturating_sub(flank), l_end), noise(r_start, (r_start + flank).min(p.len()))) {
-        (Some(a), Some(b)) => a.min(b),
-        (Some(a), None) | (None, Some(a)) => a,
-        (None, None) => return refuse,
-    };
-    Ok(Flanks { left, right, mean: 0.5 * (left.0 + right.0), noise })
 }
 
 /// The tests of a peak at `m` against its flanks `f`, and its centre: too weak for the local
@@ -705,9 +651,6 @@ struct Search<'a, 'b> {
     vertical: bool,
     scale: f32,
     saturation: f32,
-    /// The widest peak whose background may be taken from the valleys beside it: a multiple
-    /// of the line's typical width in earlier frames (`None` until one is known).
-    valley_width: Option<f32>,
 }
 
 impl Search<'_, '_> {
@@ -739,7 +682,7 @@ impl Search<'_, '_> {
         if let Some((c, r)) = near {
             let (a, b) = ((c - off - r).max(0.0) as usize, ((c - off + r).max(0.0) as usize + 1).min(p.len()));
             let m = a + S::argmax(p.get(a..b)?)?;
-            let peak = find_peak(p, m, cfg, self.scale, self.saturation, self.valley_width).ok()?;
+            let peak = find_peak(p, m, cfg, self.scale, self.saturation).ok()?;
             return ((peak.pos + off - c).abs() <= r).then_some(peak);
         }
         // Brightest first, then the sample of the highest peak contrast (a dim line in a dark
@@ -754,7 +697,7 @@ impl Search<'_, '_> {
                 argmax_outside(p, &refused[..k])
             };
             let Some(m) = m else { continue };
-            match find_peak(p, m, cfg, self.scale, self.saturation, self.valley_width) {
+            match find_peak(p, m, cfg, self.scale, self.saturation) {
                 Ok(peak) => return Some(peak),
                 Err(run) => {
                     refused[k] = run;
@@ -769,10 +712,6 @@ impl Search<'_, '_> {
 /// A narrow peak is tried again with flanks right beside it when it stands this many times
 /// `min_strength` above the samples two beyond its half-maximum run.
 const NARROW_RETRY: f32 = 2.0;
-
-/// A peak judged against the valleys beside it may be at most this many times the line's
-/// typical width.
-const VALLEY_WIDTH_PER_TYPICAL: f32 = 1.5;
 
 /// The flanks of a narrow line tried again start this many line widths (FWHM) from the peak.
 const GAP_PER_WIDTH: f32 = 1.2;
@@ -848,16 +787,8 @@ impl EdgeDetector {
         let samples = if vertical { h } else { w };
         out.reset(cfg.line_orientation, w, h, samples as usize, enc.is_color());
         let (outer, inner) = if vertical { (y0..y1, x0..x1) } else { (x0..x1, y0..y1) };
-        let search = Search {
-            image,
-            cfg,
-            outer,
-            inner,
-            vertical,
-            scale: level_scale(enc),
-            saturation: enc.max_value(),
-            valley_width: self.width_px.map(|w| VALLEY_WIDTH_PER_TYPICAL * w),
-        };
+        let search =
+            Search { image, cfg, outer, inner, vertical, scale: level_scale(enc), saturation: enc.max_value() };
         let mut stats = DetectStats::default();
         self.state.clear();
         self.state.resize(samples as usize, (false, None));
@@ -1048,8 +979,8 @@ mod tests {
             let float: Vec<f32> = row.iter().map(|&v| f32::from(v)).collect();
             let method = [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic][method];
             let cfg = EdgeConfig { method, ..Default::default() };
-            let a = u8::argmax(&row).and_then(|m| find_peak(&row, m, &cfg, 1.0, 255.0, None).ok());
-            let b = f32::argmax(&float).and_then(|m| find_peak(&float, m, &cfg, 1.0, 255.0, None).ok());
+            let a = u8::argmax(&row).and_then(|m| find_peak(&row, m, &cfg, 1.0, 255.0).ok());
+            let b = f32::argmax(&float).and_then(|m| find_peak(&float, m, &cfg, 1.0, 255.0).ok());
             proptest::prop_assert_eq!(a.is_some(), b.is_some(), "{:?} {:?} {:?}", row, a, b);
             if let (Some(a), Some(b)) = (a, b) {
                 proptest::prop_assert!((a.pos - b.pos).abs() < 1e-3, "{:?} {:?}", a, b);
@@ -1411,50 +1342,6 @@ mod tests {
         let mut flat = image_from(140, 200, |_, _, _| 8.0);
         add_noise(&mut flat, noise, 22);
         assert_eq!(detect(&flat, EdgeConfig::default()).found(), 0);
-    }
-
-    #[test]
-    fn dim_line_on_dark_print_beside_a_bright_surface_is_found() {
-        // Dark print (12) begins at column 60, bright cloth (55) before it; the line (FWHM 2,
-        // 60 over the print) runs 3.5-6 px into the print, so its ordinary flanks reach onto
-        // the cloth. Once the line's width is known (an earlier frame), its background is the
-        // valley between the two.
-        let top = box_line(-0.5, 0.5, 0.0, 2.0);
-        let centre = |y: u32| 63.5 + 2.5 * f64::from(y) / 200.0;
-        let scene = |line: bool| {
-            let mut img = image_from(140, 200, |y, a, b| {
-                let base = if b <= 60.0 {
-                    55.0
-                } else if a >= 60.0 {
-                    12.0
-                } else {
-                    12.0 + 43.0 * (60.0 - a)
-                };
-                base + if line { 60.0 * box_line(a, b, centre(y), 2.0) / top } else { 0.0 }
-            });
-            add_noise(&mut img, 1.5, 31);
-            img
-        };
-        let plain = {
-            let mut img = image_from(140, 200, |y, a, b| 12.0 + 60.0 * box_line(a, b, centre(y), 2.0) / top);
-            add_noise(&mut img, 1.5, 32);
-            img
-        };
-        for m in SUBPIXEL_METHODS {
-            let mut det = EdgeDetector::new(EdgeConfig { method: m, ..Default::default() }).unwrap();
-            let mut out = LaserLine::default();
-            det.detect(&plain.view().unwrap(), &mut out).unwrap();
-            det.detect(&scene(true).view().unwrap(), &mut out).unwrap();
-            let errs: Vec<f64> = (0..200u32)
-                .filter_map(|y| Some(f64::from(out.u[y as usize]) - centre(y)).filter(|e| e.is_finite()))
-                .collect();
-            assert!(errs.len() >= 190, "{m:?}: found in {} of 200 rows", errs.len());
-            let worst = errs.iter().fold(0.0f64, |a, e| a.max(e.abs()));
-            assert!(worst < 0.35, "{m:?}: worst {worst} px");
-            // The edge alone (the laser off) is a step, not a line.
-            det.detect(&scene(false).view().unwrap(), &mut out).unwrap();
-            assert_eq!(out.found(), 0, "{m:?}: the step taken for a line");
-        }
     }
 
     #[test]
