@@ -300,9 +300,8 @@ fn probe_dark_misses() {
         let ft = s.frame_time(f);
         let img = s.render(cam, f);
         det.detect(&img.view().unwrap(), &mut line).unwrap();
-        let optical_from_table = xsurf_core::pose::table_from_carm(ft.travel_m, 0.0, 0.0)
-            .compose(&geo.carm_from_optical)
-            .inverse();
+        let optical_from_table =
+            xsurf_core::pose::table_from_carm(ft.travel_m, 0.0, 0.0).compose(&geo.carm_from_optical).inverse();
         let mut rows = std::collections::BTreeMap::new();
         for p in band {
             if let Some((u, v)) = geo.model.project(optical_from_table.transform_point(p)) {
