@@ -155,6 +155,97 @@ impl Grid {
         }
         fills.len()
     }
+
+    /// Prepares a finished grid for meshing as the mesher does: rejects the points that their
+    /// neighbours contradict (`outlier_tolerance_m`), then fills single holes if
+    /// `fill_single_holes`. Returns the points rejected and filled.
+    pub fn clean(&mut self, cfg: &MeshConfig) -> Cleaned {
+        let rejected = self.reject_contradicted(cfg.outlier_tolerance_m, cfg.max_edge_m);
+        let filled = if cfg.fill_single_holes { self.fill_single_holes(cfg.max_edge_m) } else { 0 };
+        Cleaned { rejected, filled }
+    }
+
+    /// Rejects (sets to NaN) the points that their grid neighbours contradict, and returns how
+    /// many. This is where a line detector's wrong peak ends up: a highlight, an occlusion
+    /// edge's mixed pixel, a bright edge taken for the line in a few rows. Such points sit off a
+    /// surface that the points around them agree on.
+    ///
+    /// Each point is judged along its frame (the neighbouring samples) and across frames (the
+    /// same sample in the neighbouring frames). In each direction its neighbours predict it by
+    /// straight extrapolation from the two points before it and from the two after it, or, where
+    /// neither pair exists, by the midpoint of the points either side. A prediction is made only
+    /// from points closer to each other than `max_gap_m` (the same surface). A wrong run two
+    /// points wide is then contradicted from both sides: each side's extrapolation runs into
+    /// the other wrong point or past it. A point is contradicted
+    /// in a direction when that direction makes at least one prediction and every prediction
+    /// misses it by more than `tolerance_m`; it is rejected when it is contradicted in either
+    /// direction. A real step keeps its points: the side of the step a point lies on predicts
+    /// it. A point with too few neighbours to predict it is kept. All verdicts are taken on the
+    /// grid as it was, then applied, so the order does not matter. `tolerance_m <= 0` rejects
+    /// nothing.
+    pub fn reject_contradicted(&mut self, tolerance_m: f32, max_gap_m: f32) -> usize {
+        let (ns, nf) = (self.samples, self.frames());
+        if !(tolerance_m > 0.0) || ns == 0 {
+            return 0;
+        }
+        let pts = &self.points;
+        let at = |s: isize, f: isize| -> Option<[f32; 3]> {
+            if s < 0 || f < 0 || s >= ns as isize || f >= nf as isize {
+                return None;
+            }
+            Some(pts[f as usize * ns + s as usize]).filter(|p| p[0].is_finite())
+        };
+        let (tol2, gap2) = (tolerance_m * tolerance_m, max_gap_m * max_gap_m);
+        // The verdict in one direction: `step(k)` is the neighbour k steps away.
+        let contradicted = |p: [f32; 3], step: &dyn Fn(isize) -> Option<[f32; 3]>| -> bool {
+            let (b2, b1, a1, a2) = (step(-2), step(-1), step(1), step(2));
+            let mut predicted = false;
+            let mut agrees = |q: [f32; 3]| {
+                predicted = true;
+                dist2(p, q) <= tol2
+            };
+            let extrapolate = |n: Option<[f32; 3]>, m: Option<[f32; 3]>| match (n, m) {
+                (Some(n), Some(m)) if dist2(n, m) <= gap2 => Some([0, 1, 2].map(|k| 2.0 * n[k] - m[k])),
+                _ => None,
+            };
+            let (before, after) = (extrapolate(b1, b2), extrapolate(a1, a2));
+            let between = match (b1, a1) {
+                (Some(b), Some(a)) if before.is_none() && after.is_none() && dist2(a, b) <= 4.0 * gap2 => {
+                    Some(mid(a, b))
+                }
+                _ => None,
+            };
+            let hits = [before, after, between].into_iter().flatten().any(&mut agrees);
+            predicted && !hits
+        };
+        let mut rejected = Vec::new();
+        for f in 0..nf as isize {
+            for s in 0..ns as isize {
+                let Some(p) = at(s, f) else { continue };
+                let along = |k: isize| at(s + k, f);
+                let across = |k: isize| at(s, f + k);
+                if contradicted(p, &along) || contradicted(p, &across) {
+                    rejected.push(f as usize * ns + s as usize);
+                }
+            }
+        }
+        for &i in &rejected {
+            self.points[i] = [f32::NAN; 3];
+            self.intensity[i] = 0.0;
+            self.range[i] = f32::NAN;
+            self.rgb[i] = 0;
+        }
+        rejected.len()
+    }
+}
+
+/// What [`Grid::clean`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Cleaned {
+    /// Points rejected because their neighbours contradict them.
+    pub rejected: usize,
+    /// Single holes filled.
+    pub filled: usize,
 }
 
 fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -184,6 +275,9 @@ pub struct MeshConfig {
     pub min_angle_deg: f32,
     /// Fill isolated single missing points before meshing.
     pub fill_single_holes: bool,
+    /// Points that their grid neighbours miss by more than this are rejected before meshing,
+    /// metres (0: none); see [`Grid::reject_contradicted`].
+    pub outlier_tolerance_m: f32,
     /// Laplacian smoothing iterations (0: none); boundary vertices stay fixed.
     pub smooth_iterations: u32,
     /// Laplacian step (0..1].
@@ -197,6 +291,7 @@ impl Default for MeshConfig {
             max_edge_per_m: 0.0,
             min_angle_deg: 12.0,
             fill_single_holes: true,
+            outlier_tolerance_m: 0.0035,
             smooth_iterations: 0,
             smooth_lambda: 0.5,
         }
@@ -214,6 +309,9 @@ impl MeshConfig {
         }
         if !(0.0..60.0).contains(&self.min_angle_deg) {
             return Err(format!("min_angle_deg must be in [0, 60), got {}", self.min_angle_deg));
+        }
+        if !(self.outlier_tolerance_m >= 0.0 && self.outlier_tolerance_m.is_finite()) {
+            return Err(format!("outlier_tolerance_m must be >= 0, got {}", self.outlier_tolerance_m));
         }
         if !(self.smooth_lambda > 0.0 && self.smooth_lambda <= 1.0) {
             return Err(format!("smooth_lambda must be in (0, 1], got {}", self.smooth_lambda));
@@ -652,6 +750,85 @@ mod tests {
             g.push(f as i64, &p).unwrap();
         }
         g
+    }
+
+    /// A grid of `z(x, y)` sampled `ds` apart along frames and `df` apart across them, with
+    /// uniform noise of `noise` metres either way (a fixed sequence).
+    fn surface(ns: usize, nf: usize, ds: f32, df: f32, noise: f32, z: impl Fn(f32, f32) -> f32) -> Grid {
+        let mut g = Grid::new(ns);
+        let mut seed = 12345u32;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
+        };
+        for f in 0..nf {
+            let p = Profile {
+                points: (0..ns)
+                    .map(|s| {
+                        let (x, y) = (s as f32 * ds, f as f32 * df);
+                        [x, y, z(x, y) + noise * rnd()]
+                    })
+                    .collect(),
+                intensity: vec![100.0; ns],
+                rgb: None,
+                range: vec![1.0; ns],
+                ..Default::default()
+            };
+            g.push(f as i64, &p).unwrap();
+        }
+        g
+    }
+
+    /// Smooth surfaces, ridges and steps in either direction keep every point, at the sample
+    /// spacing of a slow scan and of a fast one (frames 4.7 mm apart).
+    #[test]
+    fn surfaces_ridges_and_steps_keep_their_points() {
+        type Height = fn(f32, f32) -> f32;
+        let cases: [(&str, Height); 5] = [
+            ("dome", |x, y| 0.08 - ((x - 0.04).powi(2) + (y - 0.08).powi(2)) * 3.0),
+            ("ridge across frames", |_, y| 0.086 - 0.82 * (y - 0.08).abs()),
+            ("ridge along frames", |x, _| 0.086 - 0.82 * (x - 0.04).abs()),
+            ("step across frames", |_, y| if y > 0.08 { 0.04 } else { 0.0 }),
+            ("step along frames", |x, _| if x > 0.04 { 0.008 } else { 0.0 }),
+        ];
+        for (name, z) in &cases {
+            for df in [0.0023, 0.0047] {
+                let mut g = surface(80, (0.16 / df) as usize, 0.001, df, 0.0003, z);
+                let before = g.valid();
+                assert_eq!(g.reject_contradicted(0.003, 0.012), 0, "{name}, frames {df} m apart");
+                assert_eq!(g.valid(), before);
+            }
+        }
+    }
+
+    /// A wrong peak in one frame, the same in two frames over a few samples, and a run along one
+    /// frame are rejected, and nothing else.
+    #[test]
+    fn points_their_neighbours_contradict_are_rejected() {
+        let mut g = surface(60, 60, 0.001, 0.0023, 0.0003, |x, y| 0.02 + 0.3 * x - 0.2 * y);
+        let ns = g.samples();
+        let mut wrong = vec![(10, 10)];
+        wrong.extend((20..25).flat_map(|s| [(s, 30), (s, 31)]));
+        wrong.extend((30..40).map(|s| (s, 50)));
+        for &(s, f) in &wrong {
+            g.points_mut()[f * ns + s][2] += 0.006;
+        }
+        let before = g.valid();
+        assert_eq!(g.reject_contradicted(0.003, 0.012), wrong.len());
+        assert_eq!(g.valid(), before - wrong.len());
+        for &(s, f) in &wrong {
+            assert!(g.point(s, f)[0].is_nan(), "sample {s} of frame {f} kept");
+            assert_eq!((g.intensity()[f * ns + s], g.rgb()[f * ns + s]), (0.0, 0));
+        }
+        // A tolerance of zero rejects nothing.
+        let mut g = flat_grid(10, 10, 0.001, 0.002);
+        g.points_mut()[55][2] = 0.05;
+        assert_eq!(g.reject_contradicted(0.0, 0.012), 0);
+        // The mesher's preparation rejects before it fills: the hole left is filled from the
+        // neighbours, not from the wrong point.
+        let cleaned = g.clean(&MeshConfig::default());
+        assert_eq!(cleaned, Cleaned { rejected: 1, filled: 1 });
+        assert!(g.point(5, 5)[2].abs() < 1e-6, "{:?}", g.point(5, 5));
     }
 
     proptest::proptest! {

@@ -41,6 +41,14 @@ pub fn declarations() -> Vec<ParamDecl> {
             "fill isolated single missing points by interpolation",
         ),
         decl(
+            "outlier_tolerance_m",
+            V::from_f32(d.outlier_tolerance_m),
+            "m",
+            "a point that its grid neighbours (along its frame or across frames) miss by more than this \
+             is rejected before meshing and counted: a wrong peak, a highlight, an occlusion edge's mixed \
+             pixel (0: keep every point)",
+        ),
+        decl(
             "smooth_iterations",
             V::Integer(d.smooth_iterations.into()),
             "",
@@ -115,6 +123,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         max_edge_per_m: p.f64("max_edge_per_m")? as f32,
         min_angle_deg: p.f64("min_angle_deg")? as f32,
         fill_single_holes: p.bool("fill_single_holes")?,
+        outlier_tolerance_m: p.f64("outlier_tolerance_m")? as f32,
         smooth_iterations: u32::try_from(smooth)
             .map_err(|_| Params::invalid("smooth_iterations", format!("{smooth:?} < 0")))?,
         smooth_lambda: p.f64("smooth_lambda")? as f32,
@@ -203,6 +212,8 @@ struct ScanAccount {
     received: Vec<i64>,
     without_line: u64,
     refused: u64,
+    /// Points of the finished grid that their neighbours contradict, rejected before meshing.
+    points_rejected: u64,
     /// `(stamp before, stamp after, frames missing between)`.
     gaps: Vec<(i64, i64, u32)>,
 }
@@ -237,6 +248,7 @@ impl ScanAccount {
             "last_frame_before_end_s": margin(self.last_ns, end_ns),
             "frames_without_line": self.without_line,
             "profiles_refused": self.refused,
+            "points_rejected": self.points_rejected,
             "gaps": self.gaps.iter().map(|g| serde_json::json!({
                 "after": convert::fmt_stamp(g.0), "before": convert::fmt_stamp(g.1), "frames": g.2,
             })).collect::<Vec<_>>(),
@@ -275,6 +287,8 @@ pub struct MesherNode {
     samples: Option<usize>,
     /// Profiles refused for a size the camera does not give.
     bad_profiles: u64,
+    /// Points rejected because their grid neighbours contradict them, over all scans.
+    points_rejected: u64,
     /// The scan's frames, for its report.
     account: ScanAccount,
 }
@@ -316,6 +330,7 @@ impl MesherNode {
             outside_scan: 0,
             samples: None,
             bad_profiles: 0,
+            points_rejected: 0,
             account: ScanAccount::default(),
         })
     }
@@ -384,15 +399,15 @@ impl MesherNode {
         if !self.active {
             return;
         }
+        let mut grid = self.grid.clone();
+        let cleaned = grid.clean(&self.cfg.mesh);
+        self.account.points_rejected = cleaned.rejected as u64;
+        self.points_rejected += cleaned.rejected as u64;
         let report = self.account.report(self.scan_id, &self.camera, aborted, end_ns, self.gaps.nominal_ns());
         out.publish(OUT_REPORT, Msg::Text(Arc::new(StringMsg { data: report })));
         self.active = false;
         self.scans += 1;
         let stamp = self.grid.stamps_ns().last().copied().unwrap_or(0);
-        let mut grid = self.grid.clone();
-        if self.cfg.mesh.fill_single_holes {
-            grid.fill_single_holes(self.cfg.mesh.max_edge_m);
-        }
         let mesh = mesh_grid(&grid, &self.cfg.mesh);
         self.triangles += mesh.triangles.len() as u64;
         self.mesh_points += mesh.positions.len() as u64;
@@ -582,6 +597,7 @@ impl Component for MesherNode {
             ("files_written", self.files_written),
             ("frames_outside_scans", self.outside_scan),
             ("bad_profiles", self.bad_profiles),
+            ("points_rejected", self.points_rejected),
         ]
     }
 }
@@ -646,5 +662,60 @@ mod tests {
         m.handle(IN_PROFILE, &profile(40, 9), &mut out).unwrap();
         m.handle(IN_PROFILE, &profile(40, 11), &mut out).unwrap();
         assert_eq!((m.outside_scan - outside, m.grid.frames(), m.account.first_ns), (1, 1, Some(11_000_000_000)));
+    }
+
+    /// A point that its neighbours contradict is rejected before meshing, counted, and named in
+    /// the scan's report; the cloud published at END does not have it.
+    #[test]
+    fn contradicted_points_are_rejected_and_reported() {
+        #![allow(clippy::unwrap_used)]
+        let params = Params::resolve(&declarations(), &Default::default()).unwrap();
+        let mut m = MesherNode::new(&params).unwrap();
+        let mut out = Outbox::default();
+        let info = CameraInfo { width: 64, height: 40, ..Default::default() };
+        m.handle(IN_INFO, &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
+        let event = |kind: u8, sec: i32| {
+            let mut e = ScanEvent { scan_id: 7, event: kind, ..Default::default() };
+            e.header.stamp.sec = sec;
+            Msg::ScanEvent(Arc::new(e))
+        };
+        m.handle(IN_EVENTS, &event(ScanEvent::START, 1), &mut out).unwrap();
+        for f in 0..20 {
+            // A plane, 1 mm between samples and 2 mm between frames; frame 10 has a wrong
+            // peak 8 mm above it at sample 5.
+            let points = (0..40)
+                .map(|s| [s as f32 * 0.001, f as f32 * 0.002, if (f, s) == (10, 5) { 0.058 } else { 0.05 }])
+                .collect();
+            let p = Profile { points, intensity: vec![50.0; 40], rgb: None, range: vec![0.5; 40], outside_volume: 0 };
+            let mut h = xsurf_msgs::std_msgs::Header::default();
+            (h.stamp.sec, h.stamp.nanosec) = (2, f * 10_000_000);
+            m.handle(IN_PROFILE, &Msg::Cloud(Arc::new(convert::profile_cloud(&p, h))), &mut out).unwrap();
+        }
+        m.handle(IN_EVENTS, &event(ScanEvent::END, 3), &mut out).unwrap();
+        m.finish(&mut out);
+        let report = out
+            .items
+            .iter()
+            .find_map(|(port, msg)| match msg {
+                Msg::Text(t) if *port == OUT_REPORT => {
+                    Some(serde_json::from_str::<serde_json::Value>(&t.data).unwrap())
+                }
+                _ => None,
+            })
+            .unwrap();
+        assert_eq!(report["points_rejected"], 1, "{report}");
+        assert!(m.counters().contains(&("points_rejected", 1)));
+        let cloud = out
+            .items
+            .iter()
+            .rev()
+            .find_map(|(port, msg)| match msg {
+                Msg::Cloud(c) if *port == OUT_CLOUD => Some(convert::cloud_grid(c).unwrap()),
+                _ => None,
+            })
+            .unwrap();
+        // The single hole it leaves is filled from its neighbours (`fill_single_holes`).
+        assert_eq!(cloud.valid(), 40 * 20);
+        assert!((cloud.point(5, 10)[2] - 0.05).abs() < 1e-6, "{:?}", cloud.point(5, 10));
     }
 }
