@@ -619,16 +619,23 @@ mod tests {
         }
         assert_eq!(missing, 2);
     }
-    /// The grid's samples per frame come from camera_info: a stray 10-sample profile arriving
-    /// first no longer fixes the grid and costs the camera's real profiles (issue 24).
-    #[test]
-    fn the_grid_size_comes_from_the_camera() {
+    /// A mesher with its defaults that has the camera_info of a 64x40 camera.
+    fn mesher_of_a_64x40_camera() -> (MesherNode, Outbox) {
         #![allow(clippy::unwrap_used)]
         let params = Params::resolve(&declarations(), &Default::default()).unwrap();
         let mut m = MesherNode::new(&params).unwrap();
         let mut out = Outbox::default();
         let info = CameraInfo { width: 64, height: 40, ..Default::default() };
         m.handle(IN_INFO, &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
+        (m, out)
+    }
+
+    /// The grid's samples per frame come from camera_info: a stray 10-sample profile arriving
+    /// first no longer fixes the grid and costs the camera's real profiles (issue 24).
+    #[test]
+    fn the_grid_size_comes_from_the_camera() {
+        #![allow(clippy::unwrap_used)]
+        let (mut m, mut out) = mesher_of_a_64x40_camera();
         let profile = |n: usize, sec: i32| {
             let p = Profile {
                 points: vec![[0.1, 0.2, 0.3]; n],
@@ -669,11 +676,7 @@ mod tests {
     #[test]
     fn contradicted_points_are_rejected_and_reported() {
         #![allow(clippy::unwrap_used)]
-        let params = Params::resolve(&declarations(), &Default::default()).unwrap();
-        let mut m = MesherNode::new(&params).unwrap();
-        let mut out = Outbox::default();
-        let info = CameraInfo { width: 64, height: 40, ..Default::default() };
-        m.handle(IN_INFO, &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
+        let (mut m, mut out) = mesher_of_a_64x40_camera();
         let event = |kind: u8, sec: i32| {
             let mut e = ScanEvent { scan_id: 7, event: kind, ..Default::default() };
             e.header.stamp.sec = sec;
