@@ -151,12 +151,23 @@ fn robot_camera() -> EdgeConfig {
     EdgeConfig { line_orientation: Orientation::Horizontal, channel: Channel::RedMinusOthers, ..Default::default() }
 }
 
+/// The hand labels (`tests/data/robot_laser_labels.csv`): frame, column, the line's row.
+fn robot_labels() -> Vec<[f64; 3]> {
+    let labels = std::fs::read_to_string(common::root().join("tests/data/robot_laser_labels.csv")).unwrap();
+    labels
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("frame"))
+        .map(|l| {
+            let f: Vec<f64> = l.split(',').map(|v| v.parse().unwrap()).collect();
+            [f[0], f[1], f[2]]
+        })
+        .collect()
+}
+
 #[test]
 fn robot_laser_line_is_found_in_every_frame_at_the_hand_labels() {
-    let labels = std::fs::read_to_string(common::root().join("tests/data/robot_laser_labels.csv")).unwrap();
     let mut checked = 0;
-    for l in labels.lines().filter(|l| !l.starts_with('#') && !l.starts_with("frame")) {
-        let f: Vec<f64> = l.split(',').map(|v| v.parse().unwrap()).collect();
+    for f in robot_labels() {
         let line = detect(&robot_frame(f[0] as u32), robot_camera());
         let v = f64::from(line.v[f[1] as usize]);
         eprintln!("frame {} column {}: label {} found {v:.2}", f[0], f[1], f[2]);
@@ -235,14 +246,10 @@ fn ciclop_calibration_views_agree_with_opencv() {
 /// clutter, where it steps over the blocks' edges, is not taken for wrong peaks.
 #[test]
 fn robot_laser_line_survives_the_rejection_of_contradicted_points() {
-    use xsurf_core::mesh::Grid;
+    use xsurf_core::mesh::{Grid, MeshConfig};
     use xsurf_core::triangulate::Profile;
-    let labels = std::fs::read_to_string(common::root().join("tests/data/robot_laser_labels.csv")).unwrap();
-    let labels: Vec<Vec<f64>> = labels
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with("frame"))
-        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
-        .collect();
+    let labels = robot_labels();
+    let cfg = MeshConfig::default();
     let (mut found, mut rejected) = (0, 0);
     for n in 2..=86 {
         let line = detect(&robot_frame(n), robot_camera());
@@ -253,7 +260,7 @@ fn robot_laser_line_survives_the_rejection_of_contradicted_points() {
         let mut grid = Grid::new(640);
         grid.push(i64::from(n), &p).unwrap();
         found += grid.valid();
-        rejected += grid.reject_contradicted(0.0035, 0.012);
+        rejected += grid.reject_contradicted(cfg.outlier_tolerance_m, cfg.max_edge_m);
         for f in labels.iter().filter(|f| f[0] as u32 == n) {
             let p = grid.point(f[1] as usize, 0);
             assert!(p[2].is_finite(), "frame {n} column {}: the labelled sample was rejected", f[1]);

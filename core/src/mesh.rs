@@ -174,12 +174,11 @@ impl Grid {
     /// same sample in the neighbouring frames). In each direction its neighbours predict it by
     /// straight extrapolation from the two points before it and from the two after it, or, where
     /// neither pair exists, by the midpoint of the points either side. A prediction is made only
-    /// from points closer to each other than `max_gap_m` (the same surface). A wrong run two
-    /// points wide is then contradicted from both sides: each side's extrapolation runs into
-    /// the other wrong point or past it. A point is contradicted
-    /// in a direction when that direction makes at least one prediction and every prediction
-    /// misses it by more than `tolerance_m`; it is rejected when it is contradicted in either
-    /// direction. A real step keeps its points: the side of the step a point lies on predicts
+    /// from points closer to each other than `max_gap_m` (the same surface). A point is
+    /// contradicted in a direction when that direction makes at least one prediction and every
+    /// prediction misses it by more than `tolerance_m`; it is rejected when it is contradicted in
+    /// either direction. A wrong run two points wide is contradicted from both sides: each
+    /// side's extrapolation runs into the other wrong point or past it. A real step keeps its points: the side of the step a point lies on predicts
     /// it. A point with too few neighbours to predict it is kept. All verdicts are taken on the
     /// grid as it was, then applied, so the order does not matter. `tolerance_m <= 0` rejects
     /// nothing.
@@ -199,11 +198,6 @@ impl Grid {
         // The verdict in one direction: `step(k)` is the neighbour k steps away.
         let contradicted = |p: [f32; 3], step: &dyn Fn(isize) -> Option<[f32; 3]>| -> bool {
             let (b2, b1, a1, a2) = (step(-2), step(-1), step(1), step(2));
-            let mut predicted = false;
-            let mut agrees = |q: [f32; 3]| {
-                predicted = true;
-                dist2(p, q) <= tol2
-            };
             let extrapolate = |n: Option<[f32; 3]>, m: Option<[f32; 3]>| match (n, m) {
                 (Some(n), Some(m)) if dist2(n, m) <= gap2 => Some([0, 1, 2].map(|k| 2.0 * n[k] - m[k])),
                 _ => None,
@@ -215,8 +209,8 @@ impl Grid {
                 }
                 _ => None,
             };
-            let hits = [before, after, between].into_iter().flatten().any(&mut agrees);
-            predicted && !hits
+            let mut predictions = [before, after, between].into_iter().flatten().peekable();
+            predictions.peek().is_some() && predictions.all(|q| dist2(p, q) > tol2)
         };
         let mut rejected = Vec::new();
         for f in 0..nf as isize {
