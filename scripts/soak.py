@@ -121,6 +121,11 @@ def main(bin_dir, launch, params, mode, seconds, files, out, warmup="60"):
                             "rss_max_last_minute_mib": round(after[-1] / 2**20, 1),
                             "rss_max_mib": round(max(after) / 2**20, 1),
                             "growth_percent": round(100 * (after[-1] - after[0]) / after[0], 1),
+                            # Over a long run: the largest of the first five minutes after the
+                            # warm-up against the largest of the last five (the band a scan's
+                            # surface moves in, compared at both ends).
+                            "growth_5_min_percent": (round(100 * (max(after[-5:]) - max(after[:5])) / max(after[:5]), 1)
+                                                     if len(after) >= 10 else None),
                             "rss_max_by_minute_mib": [round(r / 2**20) for r in by_minute],
                             # Least-squares trend of every sample after the warm-up, % per 10 min.
                             "trend_percent_per_10_min": trend([(t, r) for t, r in s if t >= warmup])}

@@ -33,9 +33,20 @@ pub struct FuseConfig {
     pub min_region: usize,
 }
 
+impl FuseConfig {
+    /// The defaults (the merger's parameter defaults), usable in constant expressions.
+    pub const DEFAULT: FuseConfig = FuseConfig {
+        min_distance_m: 0.002,
+        average: true,
+        quality_radius: 15,
+        mesh: MeshConfig::DEFAULT,
+        min_region: 50,
+    };
+}
+
 impl Default for FuseConfig {
     fn default() -> Self {
-        Self { min_distance_m: 0.002, average: true, quality_radius: 15, mesh: MeshConfig::default(), min_region: 50 }
+        Self::DEFAULT
     }
 }
 

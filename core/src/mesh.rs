@@ -280,19 +280,23 @@ pub struct MeshConfig {
 
 impl Default for MeshConfig {
     fn default() -> Self {
-        Self {
-            max_edge_m: 0.012,
-            max_edge_per_m: 0.0,
-            min_angle_deg: 12.0,
-            fill_single_holes: true,
-            outlier_tolerance_m: 0.0035,
-            smooth_iterations: 0,
-            smooth_lambda: 0.5,
-        }
+        Self::DEFAULT
     }
 }
 
 impl MeshConfig {
+    /// The defaults (the mesher's and merger's parameter defaults), usable in constant
+    /// expressions.
+    pub const DEFAULT: MeshConfig = MeshConfig {
+        max_edge_m: 0.012,
+        max_edge_per_m: 0.0,
+        min_angle_deg: 12.0,
+        fill_single_holes: true,
+        outlier_tolerance_m: 0.0035,
+        smooth_iterations: 0,
+        smooth_lambda: 0.5,
+    };
+
     /// Checks every value.
     pub fn validate(&self) -> Result<(), String> {
         if !(self.max_edge_m > 0.0 && self.max_edge_m.is_finite()) {

@@ -169,25 +169,30 @@ pub struct RefineConfig {
     pub points_per_measurement: f64,
 }
 
+impl RefineConfig {
+    /// The defaults (the merger's parameter defaults), usable in constant expressions.
+    pub const DEFAULT: RefineConfig = RefineConfig {
+        max_iterations: 40,
+        max_distance_m: 0.01,
+        trim_fraction: 0.9,
+        huber_m: 0.001,
+        max_points: 8_000,
+        min_overlap_points: 200,
+        min_overlap_fraction: 0.05,
+        max_translation_m: 0.02,
+        max_rotation_deg: 2.0,
+        max_rms_m: 0.001,
+        smooth_iterations: 6,
+        max_travel_spread_m: 0.001,
+        min_significance: 5.0,
+        min_rms_reduction: 0.25,
+        points_per_measurement: 50.0,
+    };
+}
+
 impl Default for RefineConfig {
     fn default() -> Self {
-        Self {
-            max_iterations: 40,
-            max_distance_m: 0.01,
-            trim_fraction: 0.9,
-            huber_m: 0.001,
-            max_points: 8_000,
-            min_overlap_points: 200,
-            min_overlap_fraction: 0.05,
-            max_translation_m: 0.02,
-            max_rotation_deg: 2.0,
-            max_rms_m: 0.001,
-            smooth_iterations: 6,
-            max_travel_spread_m: 0.001,
-            min_significance: 5.0,
-            min_rms_reduction: 0.25,
-            points_per_measurement: 50.0,
-        }
+        Self::DEFAULT
     }
 }
 

@@ -23,16 +23,7 @@ pub fn node_config(
     ros: &RosArgs,
 ) -> Result<(HostConfig, Box<dyn Component>), String> {
     let fq = fq_name(namespace, name);
-    let mut decls =
-        components::declarations(node).ok_or_else(|| format!("{fq}: node type {node} has no component yet"))?;
-    decls.extend(dds::host_declarations());
-    let overrides = ros.param_overrides(&fq).map_err(|e| e.to_string())?;
-    for n in ros.explicit_param_names(&fq).map_err(|e| e.to_string())? {
-        if !decls.iter().any(|d| d.name == n) {
-            log::warn!("{fq}: parameter {n} is not a parameter of {node} (`{node} --help` lists them); ignored");
-        }
-    }
-    let params = Params::resolve(&decls, &overrides).map_err(|e| format!("{fq}: {e}"))?;
+    let (decls, params) = components::resolve(node, &fq, ros, &[])?;
     QosTable::from_params(&params).map_err(|e| format!("{fq}: {e}"))?;
     let component = components::build(node, &params).map_err(|e| format!("{fq}: {e}"))?;
     for d in &decls {
@@ -124,12 +115,15 @@ pub fn node_help(node: &str) -> String {
     }
     let _ = writeln!(s, "\nparameters (name, type, default, unit: meaning):");
     for d in &decls {
-        let unit = if d.unit.is_empty() { String::new() } else { format!(" {}", d.unit) };
-        let _ = writeln!(s, "  {} ({}, default {}{unit}): {}", d.name, d.default.type_name(), d.default, d.description);
+        let _ = writeln!(s, "  {}", d.help_line());
+    }
+    let _ = writeln!(s, "\nparameters of every node (the host's):");
+    for d in dds::host_declarations() {
+        let _ = writeln!(s, "  {}", d.help_line());
     }
     let _ = writeln!(
         s,
-        "  use_sim_time (bool, default false): stamps from /clock\n  qos.sensor.*, qos.reliable.*: QoS overrides of the topic classes (nodes/README.md)\n\nservices: ~/list_parameters, ~/get_parameters, ~/set_parameters, ~/set_parameters_atomically,\n  ~/describe_parameters, ~/get_parameter_types (rcl_interfaces, as `ros2 param` uses them)"
+        "\nservices: ~/list_parameters, ~/get_parameters, ~/set_parameters, ~/set_parameters_atomically,\n  ~/describe_parameters, ~/get_parameter_types (rcl_interfaces, as `ros2 param` uses them)"
     );
     s
 }

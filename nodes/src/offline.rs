@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use xsurf_formats::bag::Bag;
 use xsurf_runtime::component::Msg;
-use xsurf_runtime::params::{ParamValue, Params};
+use xsurf_runtime::params::ParamValue;
 use xsurf_runtime::rosargs::{fq_name, RosArgs};
 use xsurf_runtime::router::Router;
 
@@ -302,17 +302,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
                  extra: &[(&str, ParamValue)]|
      -> anyhow::Result<Box<dyn xsurf_runtime::component::Component>> {
         let fq = fq_name(ns, node);
-        let mut overrides = ros.param_overrides(&fq)?;
-        let decls = components::declarations(node).unwrap_or_default();
-        for n in ros.explicit_param_names(&fq)? {
-            if !decls.iter().any(|d| d.name == n) && !n.starts_with("qos.") && n != "use_sim_time" {
-                log::warn!("{fq}: parameter {n} is not a parameter of {node} (`{node} --help` lists them); ignored");
-            }
-        }
-        for (k, v) in extra {
-            overrides.insert(k.to_string(), v.clone());
-        }
-        let params = Params::resolve(&decls, &overrides).with_context(|| format!("node {fq}"))?;
+        let (_, params) = components::resolve(node, &fq, &ros, extra).map_err(anyhow::Error::msg)?;
         components::build(node, &params).with_context(|| format!("node {fq}"))
     };
     for cam in &cameras {

@@ -13,7 +13,7 @@
 //! counted; other messages wait (their publishers are reliable).
 
 use crate::component::{Component, Msg, Port, QosClass};
-use crate::params::{ParamDecl, ParamValue, Params};
+use crate::params::{NodeParams, ParamDecl, ParamValue, Params};
 use crate::rosargs::Remap;
 use futures::StreamExt;
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
@@ -507,42 +507,39 @@ pub fn create_node(
     Ok(DdsNode { node, pubs: Publishers::default() })
 }
 
-/// The host's own parameters, declared on every node: QoS by topic class, read at start-up.
+crate::choice! {
+    /// A topic class's reliability (the `qos.*.reliability` parameters).
+    pub enum ReliabilityParam {
+        /// Lost samples are resent.
+        Reliable = "reliable",
+        /// Lost samples stay lost.
+        BestEffort = "best_effort",
+    }
+}
+
+crate::parameters! {
+    /// The host's own parameters, declared on every node: QoS by topic class, read at start-up.
+    pub struct HostParams {
+        /// take time from `/clock` (`rosgraph_msgs/msg/Clock`), read at start-up
+        use_sim_time: bool = false;
+        /// camera streams: best_effort or reliable (read at start-up)
+        qos_sensor_reliability ["qos.sensor.reliability"]: ReliabilityParam = ReliabilityParam::BestEffort, via Choice;
+        /// camera streams: history depth (read at start-up)
+        qos_sensor_depth ["qos.sensor.depth"]: usize = 5, unit "messages", range 1..=1000;
+        /// lines, profiles, events, reports, /tf: reliable or best_effort (read at start-up)
+        qos_reliable_reliability ["qos.reliable.reliability"]: ReliabilityParam = ReliabilityParam::Reliable, via Choice;
+        /// lines, profiles, events, reports, /tf: history depth (read at start-up)
+        qos_reliable_depth ["qos.reliable.depth"]: usize = 10, unit "messages", range 1..=1000;
+        /// clouds, meshes, overlay (each supersedes the last): reliable or best_effort (read at start-up)
+        qos_state_reliability ["qos.state.reliability"]: ReliabilityParam = ReliabilityParam::Reliable, via Choice;
+        /// clouds, meshes, overlay: history depth (read at start-up)
+        qos_state_depth ["qos.state.depth"]: usize = 1, unit "messages", range 1..=1000;
+    }
+}
+
+/// The host's own parameters, declared on every node.
 pub fn host_declarations() -> Vec<ParamDecl> {
-    let d = |name, default, unit, description| ParamDecl { name, default, unit, description };
-    vec![
-        d(
-            "qos.sensor.reliability",
-            ParamValue::String("best_effort".into()),
-            "",
-            "camera streams: best_effort or reliable (read at start-up)",
-        ),
-        d("qos.sensor.depth", ParamValue::Integer(5), "messages", "camera streams: history depth (read at start-up)"),
-        d(
-            "qos.reliable.reliability",
-            ParamValue::String("reliable".into()),
-            "",
-            "lines, profiles, events, reports, /tf: reliable or best_effort (read at start-up)",
-        ),
-        d(
-            "qos.reliable.depth",
-            ParamValue::Integer(10),
-            "messages",
-            "lines, profiles, events, reports, /tf: history depth (read at start-up)",
-        ),
-        d(
-            "qos.state.reliability",
-            ParamValue::String("reliable".into()),
-            "",
-            "clouds, meshes, overlay (each supersedes the last): reliable or best_effort (read at start-up)",
-        ),
-        d(
-            "qos.state.depth",
-            ParamValue::Integer(1),
-            "messages",
-            "clouds, meshes, overlay: history depth (read at start-up)",
-        ),
-    ]
+    HostParams::declarations()
 }
 
 /// QoS per class after the `qos.*` parameters.
@@ -556,31 +553,24 @@ pub struct QosTable {
 impl QosTable {
     /// From a node's parameters (missing values keep the defaults).
     pub fn from_params(p: &Params) -> Result<QosTable, String> {
-        let class = |prefix: &str, base: QosProfile| -> Result<QosProfile, String> {
-            let mut q = base;
-            if let Some(ParamValue::String(r)) = p.get(&format!("{prefix}.reliability")) {
-                q = match r.as_str() {
-                    "reliable" => {
-                        q.reliability(Reliability::Reliable { when_full: WhenFull::Wait(Duration::from_millis(100)) })
-                    }
-                    "best_effort" => q.reliability(Reliability::BestEffort),
-                    other => {
-                        return Err(format!("parameter {prefix}.reliability: {other:?} is not reliable or best_effort"))
-                    }
-                };
-            }
-            if let Some(ParamValue::Integer(d)) = p.get(&format!("{prefix}.depth")) {
-                if !(1..=1000).contains(d) {
-                    return Err(format!("parameter {prefix}.depth: {d} is not in 1..=1000"));
+        let decls = HostParams::declarations();
+        let given = p.iter().filter(|(n, _)| decls.iter().any(|d| d.name == n.as_str()));
+        let p = Params::resolve(&decls, &given.map(|(n, v)| (n.clone(), v.clone())).collect())
+            .and_then(|p| HostParams::from_params(&p))
+            .map_err(|e| e.to_string())?;
+        let class = |base: QosProfile, r: ReliabilityParam, depth: usize| {
+            base.reliability(match r {
+                ReliabilityParam::Reliable => {
+                    Reliability::Reliable { when_full: WhenFull::Wait(Duration::from_millis(100)) }
                 }
-                q = q.history(History::KeepLast { depth: *d as usize });
-            }
-            Ok(q)
+                ReliabilityParam::BestEffort => Reliability::BestEffort,
+            })
+            .history(History::KeepLast { depth })
         };
         Ok(QosTable {
-            sensor: class("qos.sensor", qos(QosClass::Sensor))?,
-            reliable: class("qos.reliable", qos(QosClass::Reliable))?,
-            state: class("qos.state", qos(QosClass::State))?,
+            sensor: class(qos(QosClass::Sensor), p.qos_sensor_reliability, p.qos_sensor_depth),
+            reliable: class(qos(QosClass::Reliable), p.qos_reliable_reliability, p.qos_reliable_depth),
+            state: class(qos(QosClass::State), p.qos_state_reliability, p.qos_state_depth),
         })
     }
     /// The profile of a class.

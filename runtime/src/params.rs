@@ -106,6 +106,54 @@ pub struct ParamDecl {
     pub unit: &'static str,
     /// Meaning.
     pub description: &'static str,
+    /// The closed interval a number must lie in, if the declaration bounds it (checked when
+    /// the parameters are read, at start-up and at every run-time set).
+    pub range: Option<(f64, f64)>,
+}
+
+impl ParamDecl {
+    /// A declaration without a range.
+    pub fn new(name: &'static str, default: ParamValue, unit: &'static str, description: &'static str) -> ParamDecl {
+        ParamDecl { name, default, unit, description, range: None }
+    }
+    /// The range as the docs show it (`[0, 600]`), or "".
+    pub fn range_text(&self) -> String {
+        self.range.map(|(lo, hi)| format!("[{lo}, {hi}]")).unwrap_or_default()
+    }
+    /// The line of a node's `--help`: `name (type, default D unit, in [lo, hi]): meaning`.
+    pub fn help_line(&self) -> String {
+        let unit = if self.unit.is_empty() { String::new() } else { format!(" {}", self.unit) };
+        let range = self.range.map(|_| format!(", in {}", self.range_text())).unwrap_or_default();
+        format!(
+            "{} ({}, default {}{unit}{range}): {}",
+            self.name,
+            self.default.type_name(),
+            self.default,
+            self.description
+        )
+    }
+    /// The row of the node docs' parameter table (see [`markdown_table`]).
+    pub fn markdown_row(&self) -> String {
+        format!(
+            "| `{}` | {} | `{}` | {} | {} | {} |",
+            self.name,
+            self.default.type_name(),
+            self.default,
+            self.unit,
+            self.range_text(),
+            self.description
+        )
+    }
+}
+
+/// The parameter table of a node's docs (nodes/README.md), from its declarations.
+pub fn markdown_table(decls: &[ParamDecl]) -> String {
+    let mut s = String::from("| parameter | type | default | unit | range | meaning |\n|---|---|---|---|---|---|\n");
+    for d in decls {
+        s.push_str(&d.markdown_row());
+        s.push('\n');
+    }
+    s
 }
 
 /// Why parameters were refused.
@@ -151,7 +199,7 @@ impl Params {
             decls.iter().map(|d| (d.name.to_string(), d.default.clone())).collect();
         for (name, v) in overrides {
             let v = match decls.iter().find(|d| d.name == name) {
-                Some(d) => coerce(name, &d.default, v.clone())?,
+                Some(d) => checked(d, v.clone())?,
                 None => v.clone(),
             };
             values.insert(name.clone(), v);
@@ -161,7 +209,7 @@ impl Params {
     /// Sets one value at run time, checked against the declaration's type.
     pub fn set(&mut self, decls: &[ParamDecl], name: &str, v: ParamValue) -> Result<(), ParamError> {
         let d = decls.iter().find(|d| d.name == name).ok_or_else(|| ParamError::Undeclared(name.into()))?;
-        let v = coerce(name, &d.default, v)?;
+        let v = checked(d, v)?;
         self.values.insert(name.to_string(), v);
         Ok(())
     }
@@ -230,6 +278,25 @@ fn wrong(name: &str, expected: &'static str, v: &ParamValue) -> ParamError {
     ParamError::WrongType { name: name.into(), expected, got: v.type_name(), value: v.to_string() }
 }
 
+/// `v` in the declaration's type and range.
+fn checked(d: &ParamDecl, v: ParamValue) -> Result<ParamValue, ParamError> {
+    let v = coerce(d.name, &d.default, v)?;
+    let x = match v {
+        ParamValue::Double(x) => x,
+        ParamValue::Integer(i) => i as f64,
+        _ => return Ok(v),
+    };
+    if let Some((lo, hi)) = d.range {
+        if !(lo..=hi).contains(&x) {
+            let unit = if d.unit.is_empty() { String::new() } else { format!(" {}", d.unit) };
+            return Err(Params::invalid(d.name, format!("{v}{unit} is not in [{lo}, {hi}]")));
+        }
+    } else if !x.is_finite() {
+        return Err(Params::invalid(d.name, format!("{v} is not a finite number")));
+    }
+    Ok(v)
+}
+
 fn coerce(name: &str, default: &ParamValue, v: ParamValue) -> Result<ParamValue, ParamError> {
     Ok(match (default, v) {
         (ParamValue::Double(_), ParamValue::Integer(i)) => ParamValue::Double(i as f64),
@@ -246,6 +313,308 @@ fn coerce(name: &str, default: &ParamValue, v: ParamValue) -> Result<ParamValue,
         (d, v) if d.type_name() == v.type_name() => v,
         (d, v) => return Err(wrong(name, d.type_name(), &v)),
     })
+}
+
+/// A Rust type a parameter is read into, and the ROS 2 value it is declared with.
+pub trait ParamType: Sized {
+    /// The ROS 2 value of `self` (a declaration's default).
+    fn to_value(&self) -> ParamValue;
+    /// The value of `name` in `p`.
+    fn read(p: &Params, name: &str) -> Result<Self, ParamError>;
+}
+
+impl ParamType for bool {
+    fn to_value(&self) -> ParamValue {
+        ParamValue::Bool(*self)
+    }
+    fn read(p: &Params, name: &str) -> Result<Self, ParamError> {
+        p.bool(name)
+    }
+}
+
+impl ParamType for i64 {
+    fn to_value(&self) -> ParamValue {
+        ParamValue::Integer(*self)
+    }
+    fn read(p: &Params, name: &str) -> Result<Self, ParamError> {
+        p.i64(name)
+    }
+}
+
+macro_rules! unsigned_param {
+    ($($t:ty),*) => {$(
+        impl ParamType for $t {
+            fn to_value(&self) -> ParamValue {
+                ParamValue::Integer(i64::try_from(*self).unwrap_or(i64::MAX))
+            }
+            fn read(p: &Params, name: &str) -> Result<Self, ParamError> {
+                let v = p.i64(name)?;
+                <$t>::try_from(v).map_err(|_| Params::invalid(name, format!("{v} is not in 0..={}", <$t>::MAX)))
+            }
+        }
+    )*};
+}
+unsigned_param!(u32, usize);
+
+impl ParamType for f64 {
+    fn to_value(&self) -> ParamValue {
+        ParamValue::Double(*self)
+    }
+    fn read(p: &Params, name: &str) -> Result<Self, ParamError> {
+        p.f64(name)
+    }
+}
+
+impl ParamType for f32 {
+    /// As written (`0.012`), not as the binary value widens.
+    fn to_value(&self) -> ParamValue {
+        ParamValue::from_f32(*self)
+    }
+    fn read(p: &Params, name: &str) -> Result<Self, ParamError> {
+        let v = p.f64(name)?;
+        let x = v as f32;
+        if v.is_finite() && !x.is_finite() {
+            return Err(Params::invalid(name, format!("{v:?} is beyond the range of a 32-bit float")));
+        }
+        Ok(x)
+    }
+}
+
+impl ParamType for String {
+    fn to_value(&self) -> ParamValue {
+        ParamValue::String(self.clone())
+    }
+    fn read(p: &Params, name: &str) -> Result<Self, ParamError> {
+        p.string(name)
+    }
+}
+
+/// A path, or none: the empty string.
+impl ParamType for Option<std::path::PathBuf> {
+    fn to_value(&self) -> ParamValue {
+        ParamValue::String(self.as_ref().map(|p| p.display().to_string()).unwrap_or_default())
+    }
+    fn read(p: &Params, name: &str) -> Result<Self, ParamError> {
+        let s = p.string(name)?;
+        Ok((!s.is_empty()).then(|| std::path::PathBuf::from(s)))
+    }
+}
+
+impl ParamType for Vec<f64> {
+    fn to_value(&self) -> ParamValue {
+        ParamValue::DoubleArray(self.clone())
+    }
+    fn read(p: &Params, name: &str) -> Result<Self, ParamError> {
+        let v = p.f64_array(name)?;
+        if let Some(x) = v.iter().find(|x| !x.is_finite()) {
+            return Err(Params::invalid(name, format!("{x} is not a finite number")));
+        }
+        Ok(v)
+    }
+}
+
+impl ParamType for Vec<String> {
+    fn to_value(&self) -> ParamValue {
+        ParamValue::StringArray(self.clone())
+    }
+    fn read(p: &Params, name: &str) -> Result<Self, ParamError> {
+        p.string_array(name)
+    }
+}
+
+/// How a field of a [`parameters!`](crate::parameters) struct is converted: [`Plain`] for the
+/// types of [`ParamType`], [`Choice`] for a set of named values.
+pub trait ParamConv<T> {
+    /// The ROS 2 value of `t`.
+    fn to_value(t: &T) -> ParamValue;
+    /// The value of `name` in `p`.
+    fn read(p: &Params, name: &str) -> Result<T, ParamError>;
+}
+
+/// The conversion of a [`ParamType`].
+pub struct Plain;
+
+impl<T: ParamType> ParamConv<T> for Plain {
+    fn to_value(t: &T) -> ParamValue {
+        t.to_value()
+    }
+    fn read(p: &Params, name: &str) -> Result<T, ParamError> {
+        T::read(p, name)
+    }
+}
+
+/// A string parameter naming one of a set of values (an enum): written by `Display`, read by
+/// `FromStr`, whose error says what the choices are.
+pub struct Choice;
+
+impl<T: std::str::FromStr<Err = String> + fmt::Display> ParamConv<T> for Choice {
+    fn to_value(t: &T) -> ParamValue {
+        ParamValue::String(t.to_string())
+    }
+    fn read(p: &Params, name: &str) -> Result<T, ParamError> {
+        p.string(name)?.parse().map_err(|e| Params::invalid(name, e))
+    }
+}
+
+/// A node's parameters as one typed struct: what [`parameters!`](crate::parameters) derives.
+pub trait NodeParams: Sized {
+    /// The declarations: names, defaults, units, ranges and meanings.
+    fn declarations() -> Vec<ParamDecl>;
+    /// The typed values from resolved parameters.
+    fn from_params(p: &Params) -> Result<Self, ParamError>;
+}
+
+/// Declares a node's parameters once: a struct whose fields carry each parameter's meaning
+/// (the field's doc comment), default, unit and range, and from which come the declarations
+/// (for the ROS 2 parameter services, `--help` and the node docs), the typed values, and their
+/// check at start-up and at every run-time set, as `generate_parameter_library` does for C++
+/// nodes.
+///
+/// ```
+/// xsurf_runtime::parameters! {
+///     /// The parameters of a node.
+///     pub struct Example {
+///         /// travel speed
+///         speed: f64 = 0.07, unit "m/s", range 0.0..=2.0;
+///         /// first column searched
+///         roi_x_offset ["roi.x_offset"]: u32 = 0, unit "px";
+///     }
+/// }
+/// use xsurf_runtime::params::{NodeParams, Params};
+/// let p = Params::resolve(&Example::declarations(), &Default::default()).unwrap();
+/// assert_eq!(Example::from_params(&p).unwrap(), Example::default());
+/// assert_eq!(Example::declarations()[1].name, "roi.x_offset");
+/// ```
+///
+/// A field is `name ["ros.name"]: Type = default`, then optionally `, unit "..."`,
+/// `, range lo..=hi` (a closed interval, for numbers) and `, via Choice` (an enum read by
+/// `FromStr` and written by `Display`); the ROS name defaults to the field's name.
+#[macro_export]
+macro_rules! parameters {
+    (
+        $(#[$meta:meta])*
+        $vis:vis struct $name:ident {
+            $(
+                $(#[doc = $doc:literal])+
+                $field:ident $([$ros:literal])? : $ty:ty = $default:expr
+                    $(, unit $unit:literal)?
+                    $(, range $lo:literal ..= $hi:literal)?
+                    $(, via $conv:ident)?
+                ;
+            )*
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, PartialEq)]
+        $vis struct $name {
+            $(
+                $(#[doc = $doc])+
+                pub $field: $ty,
+            )*
+        }
+
+        impl ::std::default::Default for $name {
+            fn default() -> Self {
+                Self { $($field: $default,)* }
+            }
+        }
+
+        impl $crate::params::NodeParams for $name {
+            fn declarations() -> ::std::vec::Vec<$crate::params::ParamDecl> {
+                ::std::vec![$(
+                    $crate::params::ParamDecl {
+                        name: $crate::parameters!(@name $field $($ros)?),
+                        default: <$crate::parameters!(@conv $($conv)?) as $crate::params::ParamConv<$ty>>::to_value(
+                            &$default,
+                        ),
+                        unit: $crate::parameters!(@unit $($unit)?),
+                        description: concat!($($doc),+).trim_ascii(),
+                        range: $crate::parameters!(@range $($lo, $hi)?),
+                    },
+                )*]
+            }
+            fn from_params(
+                p: &$crate::params::Params,
+            ) -> ::std::result::Result<Self, $crate::params::ParamError> {
+                Ok(Self {$(
+                    $field: <$crate::parameters!(@conv $($conv)?) as $crate::params::ParamConv<$ty>>::read(
+                        p,
+                        $crate::parameters!(@name $field $($ros)?),
+                    )?,
+                )*})
+            }
+        }
+    };
+    (@name $field:ident) => { stringify!($field) };
+    (@name $field:ident $ros:literal) => { $ros };
+    (@conv) => { $crate::params::Plain };
+    (@conv $conv:ident) => { $crate::params::$conv };
+    (@unit) => { "" };
+    (@unit $unit:literal) => { $unit };
+    (@range) => { None };
+    (@range $lo:literal, $hi:literal) => { Some(($lo as f64, $hi as f64)) };
+}
+
+/// An enum whose values a string parameter names (read with `via Choice` in
+/// [`parameters!`](crate::parameters)): `Display` writes the name, `FromStr` reads it and
+/// otherwise says what the choices are.
+///
+/// ```
+/// xsurf_runtime::choice! {
+///     /// Where the travel comes from.
+///     pub enum Mode {
+///         /// The speed model.
+///         Speed = "speed",
+///         /// The controller's feed.
+///         Encoder = "encoder",
+///     }
+/// }
+/// assert_eq!("encoder".parse::<Mode>(), Ok(Mode::Encoder));
+/// assert_eq!("x".parse::<Mode>().unwrap_err(), "\"x\": expected speed or encoder");
+/// assert_eq!(Mode::Speed.to_string(), "speed");
+/// ```
+#[macro_export]
+macro_rules! choice {
+    (
+        $(#[$meta:meta])*
+        $vis:vis enum $name:ident {
+            $( $(#[$vmeta:meta])* $variant:ident = $text:literal ),+ $(,)?
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+        $vis enum $name { $( $(#[$vmeta])* $variant ),+ }
+
+        impl $name {
+            /// Every value's name, in declaration order.
+            pub const NAMES: &'static [&'static str] = &[$($text),+];
+        }
+
+        impl ::std::fmt::Display for $name {
+            fn fmt(&self, f: &mut ::std::fmt::Formatter<'_>) -> ::std::fmt::Result {
+                f.write_str(match self { $( $name::$variant => $text ),+ })
+            }
+        }
+
+        impl ::std::str::FromStr for $name {
+            type Err = ::std::string::String;
+            fn from_str(s: &str) -> ::std::result::Result<Self, ::std::string::String> {
+                match s {
+                    $( $text => Ok($name::$variant), )+
+                    other => Err(format!("{other:?}: expected {}", $crate::params::one_of(Self::NAMES))),
+                }
+            }
+        }
+    };
+}
+
+/// `a, b or c`.
+pub fn one_of(names: &[&str]) -> String {
+    match names {
+        [] => String::new(),
+        [one] => (*one).to_string(),
+        [rest @ .., last] => format!("{} or {last}", rest.join(", ")),
+    }
 }
 
 #[cfg(test)]
@@ -270,8 +639,8 @@ mod tests {
     #[test]
     fn resolve_coerces_and_refuses_wrong_types() {
         let decls = [
-            ParamDecl { name: "speed", default: ParamValue::Double(0.07), unit: "m/s", description: "" },
-            ParamDecl { name: "plane", default: ParamValue::DoubleArray(vec![0.0; 4]), unit: "", description: "" },
+            ParamDecl::new("speed", ParamValue::Double(0.07), "m/s", ""),
+            ParamDecl::new("plane", ParamValue::DoubleArray(vec![0.0; 4]), "", ""),
         ];
         let mut o = BTreeMap::new();
         o.insert("speed".to_string(), ParamValue::Integer(1));
@@ -284,5 +653,93 @@ mod tests {
         assert!(e.to_string().contains("parameter speed: expected double, got string"), "{e}");
         let mut p = p;
         assert!(matches!(p.set(&decls, "nope", ParamValue::Bool(true)), Err(ParamError::Undeclared(_))));
+    }
+
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    enum Shape {
+        Flat,
+        Round,
+    }
+    impl fmt::Display for Shape {
+        fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            f.write_str(match self {
+                Shape::Flat => "flat",
+                Shape::Round => "round",
+            })
+        }
+    }
+    impl std::str::FromStr for Shape {
+        type Err = String;
+        fn from_str(s: &str) -> Result<Self, String> {
+            match s {
+                "flat" => Ok(Shape::Flat),
+                "round" => Ok(Shape::Round),
+                other => Err(format!("{other:?} is not flat or round")),
+            }
+        }
+    }
+
+    crate::parameters! {
+        /// Test parameters.
+        struct Test {
+            /// travel speed,
+            /// over two lines
+            speed: f64 = 0.07, unit "m/s", range 0.0..=2.0;
+            /// a width
+            width: f32 = 0.012, unit "m";
+            /// first column
+            roi_x ["roi.x_offset"]: u32 = 0, unit "px";
+            /// shape
+            shape: Shape = Shape::Round, via Choice;
+            /// where to write
+            out: Option<std::path::PathBuf> = None;
+            /// cameras
+            cameras: Vec<String> = vec!["cam1".into()];
+        }
+    }
+
+    #[test]
+    fn one_declaration_gives_declarations_values_and_checks() {
+        let decls = Test::declarations();
+        let names: Vec<_> = decls.iter().map(|d| d.name).collect();
+        assert_eq!(names, ["speed", "width", "roi.x_offset", "shape", "out", "cameras"]);
+        assert_eq!(decls[0].description, "travel speed, over two lines");
+        assert_eq!((decls[0].unit, decls[0].range), ("m/s", Some((0.0, 2.0))));
+        assert_eq!(decls[1].default.to_string(), "0.012");
+        assert_eq!(decls[3].default, ParamValue::String("round".into()));
+        assert_eq!(decls[4].default, ParamValue::String(String::new()));
+        let p = Params::resolve(&decls, &BTreeMap::new()).unwrap();
+        assert_eq!(Test::from_params(&p).unwrap(), Test::default());
+
+        let mut o = BTreeMap::new();
+        o.insert("shape".to_string(), ParamValue::String("flat".into()));
+        o.insert("out".to_string(), ParamValue::String("/tmp/x".into()));
+        o.insert("roi.x_offset".to_string(), ParamValue::Integer(7));
+        let t = Test::from_params(&Params::resolve(&decls, &o).unwrap()).unwrap();
+        assert_eq!((t.shape, t.roi_x), (Shape::Flat, 7));
+        assert_eq!(t.out.as_deref(), Some(std::path::Path::new("/tmp/x")));
+
+        let refused = |name: &str, v: ParamValue| {
+            let mut o = BTreeMap::new();
+            o.insert(name.to_string(), v);
+            match Params::resolve(&decls, &o) {
+                Err(e) => e.to_string(),
+                Ok(p) => Test::from_params(&p).unwrap_err().to_string(),
+            }
+        };
+        assert_eq!(refused("speed", ParamValue::Double(2.5)), "parameter speed: 2.5 m/s is not in [0, 2]");
+        assert_eq!(refused("width", ParamValue::Double(f64::NAN)), "parameter width: NaN is not a finite number");
+        assert_eq!(
+            refused("roi.x_offset", ParamValue::Integer(-1)),
+            "parameter roi.x_offset: -1 is not in 0..=4294967295"
+        );
+        assert_eq!(
+            refused("shape", ParamValue::String("cube".into())),
+            "parameter shape: \"cube\" is not flat or round"
+        );
+        // A run-time set goes through the same check.
+        let mut p = p;
+        assert!(p.set(&decls, "speed", ParamValue::Double(-1.0)).is_err());
+        assert!(p.set(&decls, "speed", ParamValue::Integer(1)).is_ok());
     }
 }

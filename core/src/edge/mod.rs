@@ -113,6 +113,37 @@ impl Channel {
     }
 }
 
+impl Channel {
+    /// The parameter value naming this channel.
+    pub fn name(self) -> &'static str {
+        match self {
+            Channel::Red => "red",
+            Channel::Luma => "luma",
+            Channel::RedMinusOthers => "red_minus_others",
+        }
+    }
+}
+
+/// `Display` as the parameter value and `FromStr` from it, with an error that names the value.
+macro_rules! named {
+    ($t:ty, $what:literal) => {
+        impl std::fmt::Display for $t {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(self.name())
+            }
+        }
+        impl std::str::FromStr for $t {
+            type Err = String;
+            fn from_str(s: &str) -> Result<Self, String> {
+                Self::parse(s).ok_or_else(|| format!($what, s))
+            }
+        }
+    };
+}
+named!(Method, "unknown method {:?} (center_of_gravity, gaussian, parabolic or gradient)");
+named!(Orientation, "{:?} is not vertical or horizontal");
+named!(Channel, "unknown channel {:?} (red_minus_others, red or luma)");
+
 /// A rectangle of the image to search (pixels); zero width or height means "to the edge".
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct Roi {
@@ -186,28 +217,33 @@ pub struct EdgeConfig {
     pub max_jump_px: f32,
 }
 
+impl EdgeConfig {
+    /// The defaults (the node's parameter defaults), usable in constant expressions.
+    pub const DEFAULT: EdgeConfig = EdgeConfig {
+        method: Method::CenterOfGravity,
+        line_orientation: Orientation::Vertical,
+        channel: Channel::RedMinusOthers,
+        roi: Roi { x_offset: 0, y_offset: 0, width: 0, height: 0 },
+        min_strength: 8.0,
+        noise_factor: 4.0,
+        peak_fraction: 0.15,
+        max_half_width_px: 12,
+        flank_px: 10,
+        max_width_px: 14.0,
+        min_width_px: 0.0,
+        gradient_threshold: 40.0,
+        color_offset_px: 8.0,
+        min_side_ratio: 0.3,
+        narrow_width_px: 3.2,
+        max_candidates: 3,
+        min_run: 5,
+        max_jump_px: 3.0,
+    };
+}
+
 impl Default for EdgeConfig {
     fn default() -> Self {
-        Self {
-            method: Method::CenterOfGravity,
-            line_orientation: Orientation::Vertical,
-            channel: Channel::RedMinusOthers,
-            roi: Roi::default(),
-            min_strength: 8.0,
-            noise_factor: 4.0,
-            peak_fraction: 0.15,
-            max_half_width_px: 12,
-            flank_px: 10,
-            max_width_px: 14.0,
-            min_width_px: 0.0,
-            gradient_threshold: 40.0,
-            color_offset_px: 8.0,
-            min_side_ratio: 0.3,
-            narrow_width_px: 3.2,
-            max_candidates: 3,
-            min_run: 5,
-            max_jump_px: 3.0,
-        }
+        Self::DEFAULT
     }
 }
 

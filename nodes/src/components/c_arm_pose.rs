@@ -19,8 +19,8 @@
 //! and the next scans are triangulated through the refined placements. (The merger's
 //! `save_rig_file` keeps them across restarts.)
 
-use super::decl;
 use crate::convert;
+use std::path::PathBuf;
 use std::sync::Arc;
 use xsurf_core::geom::Iso3;
 use xsurf_core::pose::table_from_carm;
@@ -31,39 +31,57 @@ use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
 
-/// The parameters of `c_arm_pose`.
-pub fn declarations() -> Vec<ParamDecl> {
-    vec![
-        decl("speed", V::Double(0.070), "m/s", "travel speed (the study's: 0.035, 0.070, 0.140)"),
-        decl("travel_start_m", V::Double(-0.18), "m", "travel at the start of a scan"),
-        decl("travel_end_m", V::Double(0.18), "m", "travel at which the scan ends"),
-        decl("auto_start", V::Bool(true), "", "start a scan by itself start_delay_s after start-up"),
-        decl("start_delay_s", V::Double(2.0), "s", "wait before an automatic scan"),
-        decl("scan_id", V::Integer(1), "", "id of the first scan"),
-        decl("rate_hz", V::Double(100.0), "Hz", "rate of /tf and /joint_states"),
-        decl("rig_file", V::String(String::new()), "", "rig YAML with the cameras' placement; empty: the study's rig"),
-        decl("table_frame", V::String("table".into()), "", "fixed frame"),
-        decl("carm_frame", V::String("carm".into()), "", "C-arm frame"),
-        decl("mode", V::String("speed".into()), "", "speed: the speed model; encoder: follow /carm/encoder"),
-        decl("encoder_joint", V::String("carm_travel".into()), "", "encoder mode: the joint of the travel (m)"),
-        decl("motion_threshold_m", V::Double(0.001), "m", "encoder mode: movement that starts a scan (auto_start)"),
-        decl("stop_time_s", V::Double(0.3), "s", "encoder mode: no movement for this long is a stop"),
-        decl(
-            "end_tolerance_m",
-            V::Double(0.005),
-            "m",
-            "encoder mode: a stop this close to travel_end_m is END, elsewhere ABORT (stall)",
-        ),
-        decl("max_gap_s", V::Double(0.2), "s", "encoder mode: silence of the feed during a scan is ABORT"),
-        decl(
-            "follow_placements",
-            V::Bool(true),
-            "",
-            "take the merger's refined camera placements (/surface/placements) into /tf_static between scans",
-        ),
-    ]
+xsurf_runtime::choice! {
+    /// Where the travel comes from.
+    pub enum Mode {
+        /// The speed model.
+        Speed = "speed",
+        /// The scanner controller's position feed on `/carm/encoder`.
+        Encoder = "encoder",
+    }
+}
+
+xsurf_runtime::parameters! {
+    /// The parameters of `c_arm_pose`.
+    pub struct CArmPoseParams {
+        /// travel speed (the study's: 0.035, 0.070, 0.140)
+        speed: f64 = 0.070, unit "m/s";
+        /// travel at the start of a scan
+        travel_start_m: f64 = -0.18, unit "m";
+        /// travel at which the scan ends
+        travel_end_m: f64 = 0.18, unit "m";
+        /// start a scan by itself start_delay_s after start-up
+        auto_start: bool = true;
+        /// wait before an automatic scan
+        start_delay_s: f64 = 2.0, unit "s";
+        /// id of the first scan
+        scan_id: u32 = 1;
+        /// rate of /tf and /joint_states
+        rate_hz: f64 = 100.0, unit "Hz", range 1.0..=1000.0;
+        /// rig YAML with the cameras' placement; empty: the study's rig
+        rig_file: Option<PathBuf> = None;
+        /// fixed frame
+        table_frame: String = "table".into();
+        /// C-arm frame
+        carm_frame: String = "carm".into();
+        /// speed: the speed model; encoder: follow /carm/encoder
+        mode: Mode = Mode::Speed, via Choice;
+        /// encoder mode: the joint of the travel (m)
+        encoder_joint: String = "carm_travel".into();
+        /// encoder mode: movement that starts a scan (auto_start)
+        motion_threshold_m: f64 = 0.001, unit "m";
+        /// encoder mode: no movement for this long is a stop
+        stop_time_s: f64 = 0.3, unit "s";
+        /// encoder mode: a stop this close to travel_end_m is END, elsewhere ABORT (stall)
+        end_tolerance_m: f64 = 0.005, unit "m";
+        /// encoder mode: silence of the feed during a scan is ABORT
+        max_gap_s: f64 = 0.2, unit "s";
+        /// take the merger's refined camera placements (/surface/placements) into /tf_static
+        /// between scans
+        follow_placements: bool = true;
+    }
 }
 
 struct Config {
@@ -84,57 +102,45 @@ struct Config {
     table_frame: String,
     carm_frame: String,
     follow_placements: bool,
-    rig_file: String,
+    rig_file: Option<PathBuf>,
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
-    let speed = p.f64("speed")?;
+    let p = CArmPoseParams::from_params(p)?;
+    let speed = p.speed;
     if !xsurf_core::limits::speed_ok(speed) {
         let (lo, hi) = xsurf_core::limits::SPEED_MPS;
         return Err(Params::invalid("speed", format!("{speed:?} m/s is not in ({lo:?}, {hi:?})")));
     }
-    let rate = p.f64("rate_hz")?;
-    if !(1.0..=1000.0).contains(&rate) {
-        return Err(Params::invalid("rate_hz", format!("{rate:?} is not in [1, 1000]")));
-    }
-    let rig_file = p.string("rig_file")?;
-    let rig = if rig_file.is_empty() {
-        Rig::study(640, 480)
-    } else {
-        xsurf_formats::rig::read(rig_file.as_ref()).map_err(|e| Params::invalid("rig_file", e.to_string()))?
+    let rig = match &p.rig_file {
+        None => Rig::study(640, 480),
+        Some(f) => xsurf_formats::rig::read(f).map_err(|e| Params::invalid("rig_file", e.to_string()))?,
     };
-    let id = p.i64("scan_id")?;
-    let encoder = match p.string("mode")?.as_str() {
-        "speed" => false,
-        "encoder" => true,
-        other => return Err(Params::invalid("mode", format!("{other:?}: expected speed or encoder"))),
-    };
-    let positive = |n: &str| -> Result<f64, ParamError> {
-        let v = p.f64(n)?;
+    let positive = |n: &str, v: f64| -> Result<f64, ParamError> {
         if !(v > 0.0 && v.is_finite()) {
             return Err(Params::invalid(n, format!("{v} must be positive")));
         }
         Ok(v)
     };
     Ok(Config {
-        encoder,
-        joint: p.string("encoder_joint")?,
-        motion_m: positive("motion_threshold_m")?,
-        stop_ns: (positive("stop_time_s")? * 1e9) as i64,
-        end_tol_m: positive("end_tolerance_m")?,
-        max_gap_ns: (positive("max_gap_s")? * 1e9) as i64,
+        encoder: p.mode == Mode::Encoder,
+        joint: p.encoder_joint,
+        motion_m: positive("motion_threshold_m", p.motion_threshold_m)?,
+        stop_ns: (positive("stop_time_s", p.stop_time_s)? * 1e9) as i64,
+        end_tol_m: positive("end_tolerance_m", p.end_tolerance_m)?,
+        max_gap_ns: (positive("max_gap_s", p.max_gap_s)? * 1e9) as i64,
         speed,
-        start: p.f64("travel_start_m")?,
-        end: p.f64("travel_end_m")?,
-        auto_start: p.bool("auto_start")?,
-        delay_ns: (p.f64("start_delay_s")?.max(0.0) * 1e9) as i64,
-        scan_id: u32::try_from(id).map_err(|_| Params::invalid("scan_id", format!("{id:?} is not a u32")))?,
-        period_ns: (1e9 / rate) as i64,
+        start: p.travel_start_m,
+        end: p.travel_end_m,
+        auto_start: p.auto_start,
+        delay_ns: (p.start_delay_s.max(0.0) * 1e9) as i64,
+        scan_id: p.scan_id,
+        period_ns: (1e9 / p.rate_hz) as i64,
         rig,
-        table_frame: p.string("table_frame")?,
-        carm_frame: p.string("carm_frame")?,
-        follow_placements: p.bool("follow_placements")?,
-        rig_file,
+        table_frame: p.table_frame,
+        carm_frame: p.carm_frame,
+        follow_placements: p.follow_placements,
+        rig_file: p.rig_file,
     })
 }
 
@@ -378,7 +384,7 @@ impl Component for CArmPoseNode {
         ]
     }
     fn declarations(&self) -> Vec<ParamDecl> {
-        declarations()
+        CArmPoseParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         let mut c = config(p)?;
@@ -491,6 +497,7 @@ mod tests {
     use crate::components::{build, declarations};
     use std::cell::RefCell;
     use std::rc::Rc;
+    use xsurf_runtime::params::ParamValue as V;
     use xsurf_runtime::router::Router;
 
     type Seen = Rc<RefCell<Vec<(String, Msg)>>>;

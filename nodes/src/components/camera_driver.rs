@@ -7,8 +7,9 @@
 //! rig. `rotate_180` turns every image (the study's cameras hung upside down); the calibration
 //! must then describe the turned images.
 
-use super::decl;
+use super::edge_detector::Transport;
 use crate::convert;
+use std::path::PathBuf;
 use std::sync::Arc;
 use xsurf_core::geom::Iso3;
 use xsurf_core::image::Encoding;
@@ -20,73 +21,71 @@ use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
 
-/// The parameters of `camera_driver`.
-pub fn declarations() -> Vec<ParamDecl> {
-    vec![
-        decl(
-            "source",
-            V::String("synthetic".into()),
-            "",
-            "image source: synthetic, files, or v4l2 (a USB/UVC camera; needs the cargo feature v4l2)",
-        ),
-        decl("device", V::String("/dev/video0".into()), "", "v4l2 source: the video device"),
-        decl(
-            "stamp_offset_s",
-            V::Double(0.0),
-            "s",
-            "v4l2 source: the camera's delay from exposure to delivery, subtracted from the time a frame is dequeued",
-        ),
-        decl(
-            "files",
-            V::String(String::new()),
-            "",
-            "files source: a directory (its .bmp/.png/.pgm/.ppm/.jpg in name order) or a pattern such as /data/frame_%03d.bmp",
-        ),
-        decl(
-            "timestamps_file",
-            V::String(String::new()),
-            "",
-            "files source: one stamp per frame (seconds, or integer ns), else stamps from fps",
-        ),
-        decl("loop_files", V::Bool(false), "", "files source: start again after the last frame"),
-        decl(
-            "camera_info_url",
-            V::String(String::new()),
-            "",
-            "camera_calibration YAML (file:///path or a path), as `xsurf calibrate intrinsics` writes it; empty: the rig's intrinsics",
-        ),
-        decl("rotate_180", V::Bool(false), "", "turn every image by 180 degrees before publishing"),
-        decl(
-            "scene",
-            V::String("pyramid".into()),
-            "",
-            "synthetic source: pyramid, phantom, sphere, cylinder, box or body",
-        ),
-        decl("camera", V::String(String::new()), "", "camera name in the rig (default: the node's namespace)"),
-        decl(
-            "rig_file",
-            V::String(String::new()),
-            "",
-            "rig YAML (see launch-config/rig_study.yaml); empty: the study's rig",
-        ),
-        decl("width", V::Integer(640), "px", "image width (the study rig's intrinsics are scaled to it)"),
-        decl("height", V::Integer(480), "px", "image height"),
-        decl("fps", V::Double(30.0), "Hz", "frame rate"),
-        decl("encoding", V::String("mono8".into()), "", "mono8, rgb8 or bgr8"),
-        decl(
-            "image_transport",
-            V::String("raw".into()),
-            "",
-            "raw: publish image_raw (sensor_msgs/Image); compressed: publish image_raw/compressed (sensor_msgs/CompressedImage) instead, as image_transport's compressed plugin writes it",
-        ),
-        decl("compressed_format", V::String("jpeg".into()), "", "compressed transport: jpeg or png"),
-        decl("jpeg_quality", V::Integer(95), "", "compressed transport: JPEG quality, 1..=100 (image_transport's default 95)"),
-        decl("seed", V::Integer(1), "", "synthetic sensor noise seed"),
-        decl("table_frame", V::String("table".into()), "", "fixed frame of /tf"),
-        decl("carm_frame", V::String("carm".into()), "", "C-arm frame of /tf"),
-    ]
+xsurf_runtime::choice! {
+    /// Which source the images come from (the `source` parameter).
+    pub enum SourceKind {
+        /// The synthetic scanner.
+        Synthetic = "synthetic",
+        /// An image sequence.
+        Files = "files",
+        /// A Video4Linux2 camera.
+        V4l2 = "v4l2",
+    }
+}
+
+xsurf_runtime::parameters! {
+    /// The parameters of `camera_driver`.
+    pub struct CameraDriverParams {
+        /// image source: synthetic, files, or v4l2 (a USB/UVC camera; needs the cargo feature v4l2)
+        source: SourceKind = SourceKind::Synthetic, via Choice;
+        /// v4l2 source: the video device
+        device: String = "/dev/video0".into();
+        /// v4l2 source: the camera's delay from exposure to delivery, subtracted from the time a
+        /// frame is dequeued
+        /// (in [0, 1]; checked only for the v4l2 source)
+        stamp_offset_s: f64 = 0.0, unit "s";
+        /// files source: a directory (its .bmp/.png/.pgm/.ppm/.jpg in name order) or a pattern
+        /// such as /data/frame_%03d.bmp
+        files: String = String::new();
+        /// files source: one stamp per frame (seconds, or integer ns), else stamps from fps
+        timestamps_file: Option<PathBuf> = None;
+        /// files source: start again after the last frame
+        loop_files: bool = false;
+        /// camera_calibration YAML (file:///path or a path), as `xsurf calibrate intrinsics`
+        /// writes it; empty: the rig's intrinsics
+        camera_info_url: String = String::new();
+        /// turn every image by 180 degrees before publishing
+        rotate_180: bool = false;
+        /// synthetic source: pyramid, phantom, sphere, cylinder, box or body
+        scene: String = "pyramid".into();
+        /// camera name in the rig (default: the node's namespace)
+        camera: String = String::new();
+        /// rig YAML (see launch-config/rig_study.yaml); empty: the study's rig
+        rig_file: Option<PathBuf> = None;
+        /// image width (the study rig's intrinsics are scaled to it)
+        width: i64 = 640, unit "px";
+        /// image height
+        height: i64 = 480, unit "px";
+        /// frame rate
+        fps: f64 = 30.0, unit "Hz";
+        /// mono8, rgb8 or bgr8
+        encoding: String = "mono8".into();
+        /// raw: publish image_raw (sensor_msgs/Image); compressed: publish image_raw/compressed
+        /// (sensor_msgs/CompressedImage) instead, as image_transport's compressed plugin writes it
+        image_transport: Transport = Transport::Raw, via Choice;
+        /// compressed transport: jpeg or png
+        compressed_format: String = "jpeg".into();
+        /// compressed transport: JPEG quality, 1..=100 (image_transport's default 95)
+        jpeg_quality: i64 = 95, range 1..=100;
+        /// synthetic sensor noise seed
+        seed: i64 = 1;
+        /// fixed frame of /tf
+        table_frame: String = "table".into();
+        /// C-arm frame of /tf
+        carm_frame: String = "carm".into();
+    }
 }
 
 /// Where the images come from.
@@ -123,46 +122,44 @@ struct Config {
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
-    let source = match p.string("source")?.as_str() {
-        "synthetic" => Source::Synthetic,
-        "files" => {
-            let spec = p.string("files")?;
-            let list = frame_list(&spec).map_err(|e| Params::invalid("files", e))?;
-            let ts = p.string("timestamps_file")?;
-            let stamps = if ts.is_empty() {
-                None
-            } else {
-                let s = read_stamps(std::path::Path::new(&ts)).map_err(|e| Params::invalid("timestamps_file", e))?;
-                if s.len() < list.len() {
-                    return Err(Params::invalid(
-                        "timestamps_file",
-                        format!("{ts}: {} stamps for {} frames", s.len(), list.len()),
-                    ));
+    let p = CameraDriverParams::from_params(p)?;
+    let source = match p.source {
+        SourceKind::Synthetic => Source::Synthetic,
+        SourceKind::Files => {
+            let list = frame_list(&p.files).map_err(|e| Params::invalid("files", e))?;
+            let stamps = match &p.timestamps_file {
+                None => None,
+                Some(ts) => {
+                    let s = read_stamps(ts).map_err(|e| Params::invalid("timestamps_file", e))?;
+                    if s.len() < list.len() {
+                        return Err(Params::invalid(
+                            "timestamps_file",
+                            format!("{}: {} stamps for {} frames", ts.display(), s.len(), list.len()),
+                        ));
+                    }
+                    Some(s)
                 }
-                Some(s)
             };
-            Source::Files { list, stamps, repeat: p.bool("loop_files")? }
+            Source::Files { list, stamps, repeat: p.loop_files }
         }
-        "v4l2" => {
+        SourceKind::V4l2 => {
             if !cfg!(feature = "v4l2") {
                 return Err(Params::invalid(
                     "source",
                     "v4l2: this build has no V4L2 support (build xsurf-nodes with `--features v4l2`)",
                 ));
             }
-            let device = p.string("device")?;
-            if device.is_empty() {
+            if p.device.is_empty() {
                 return Err(Params::invalid("device", "the v4l2 source needs a device such as /dev/video0"));
             }
-            let offset = p.f64("stamp_offset_s")?;
+            let offset = p.stamp_offset_s;
             if !(0.0..=1.0).contains(&offset) {
                 return Err(Params::invalid("stamp_offset_s", format!("{offset:?} is not in [0, 1]")));
             }
-            Source::V4l2 { device: device.into(), offset_ns: (offset * 1e9).round() as i64 }
+            Source::V4l2 { device: p.device.into(), offset_ns: (offset * 1e9).round() as i64 }
         }
-        other => return Err(Params::invalid("source", format!("{other:?}: expected synthetic, files or v4l2"))),
     };
-    let url = p.string("camera_info_url")?;
+    let url = p.camera_info_url;
     let camera_info = if url.is_empty() {
         None
     } else {
@@ -171,64 +168,54 @@ fn config(p: &Params) -> Result<Config, ParamError> {
             xsurf_formats::calibration::read(&path).map_err(|e| Params::invalid("camera_info_url", e.to_string()))?;
         Some(c.model().map_err(|e| Params::invalid("camera_info_url", e))?)
     };
-    let scene_name = p.string("scene")?;
-    let scene = Scene::by_name(&scene_name).ok_or_else(|| {
-        Params::invalid("scene", format!("unknown scene {scene_name:?} (known: {})", SCENE_NAMES.join(", ")))
+    let scene = Scene::by_name(&p.scene).ok_or_else(|| {
+        Params::invalid("scene", format!("unknown scene {:?} (known: {})", p.scene, SCENE_NAMES.join(", ")))
     })?;
-    let dim = |n: &str| -> Result<u32, ParamError> {
-        let v = p.i64(n)?;
+    let dim = |n: &str, v: i64| -> Result<u32, ParamError> {
         u32::try_from(v)
             .ok()
             .filter(|&v| xsurf_core::limits::image_side_ok(v))
             .ok_or_else(|| Params::invalid(n, format!("{v} is not in {}", xsurf_core::limits::image_side_text())))
     };
-    let fps = p.f64("fps")?;
+    let fps = p.fps;
     if !(fps > 0.0 && fps <= 1000.0) {
         return Err(Params::invalid("fps", format!("{fps:?} is not in (0, 1000]")));
     }
-    let enc = p.string("encoding")?;
-    let encoding = match enc.as_str() {
+    let encoding = match p.encoding.as_str() {
         "mono8" => Encoding::Mono8,
         "rgb8" => Encoding::Rgb8,
         "bgr8" => Encoding::Bgr8,
         other => return Err(Params::invalid("encoding", format!("{other:?} is not mono8, rgb8 or bgr8"))),
     };
-    let compressed = match p.string("image_transport")?.as_str() {
-        "raw" => None,
-        "compressed" => {
-            let f = p.string("compressed_format")?;
-            let codec = xsurf_formats::compressed::Codec::parse(&f)
+    let compressed = match p.image_transport {
+        Transport::Raw => None,
+        Transport::Compressed => {
+            let f = &p.compressed_format;
+            let codec = xsurf_formats::compressed::Codec::parse(f)
                 .ok_or_else(|| Params::invalid("compressed_format", format!("{f:?}: jpeg or png")))?;
-            let q = p.i64("jpeg_quality")?;
-            let q = u8::try_from(q)
-                .ok()
-                .filter(|q| (1..=100).contains(q))
-                .ok_or_else(|| Params::invalid("jpeg_quality", format!("{q:?} is not in 1..=100")))?;
-            Some((codec, q))
+            // In 1..=100 by the declaration's range.
+            Some((codec, p.jpeg_quality.clamp(1, 100) as u8))
         }
-        other => return Err(Params::invalid("image_transport", format!("{other:?}: raw or compressed"))),
     };
-    let rig_file = p.string("rig_file")?;
-    let rig = if rig_file.is_empty() {
-        None
-    } else {
-        Some(xsurf_formats::rig::read(rig_file.as_ref()).map_err(|e| Params::invalid("rig_file", e.to_string()))?)
+    let rig = match &p.rig_file {
+        None => None,
+        Some(f) => Some(xsurf_formats::rig::read(f).map_err(|e| Params::invalid("rig_file", e.to_string()))?),
     };
     Ok(Config {
         source,
         camera_info,
-        rotate_180: p.bool("rotate_180")?,
+        rotate_180: p.rotate_180,
         scene,
-        camera: p.string("camera")?,
+        camera: p.camera,
         rig,
-        width: dim("width")?,
-        height: dim("height")?,
+        width: dim("width", p.width)?,
+        height: dim("height", p.height)?,
         period_ns: (1e9 / fps) as i64,
         compressed,
         encoding,
-        seed: p.i64("seed")? as u64,
-        table_frame: p.string("table_frame")?,
-        carm_frame: p.string("carm_frame")?,
+        seed: p.seed as u64,
+        table_frame: p.table_frame,
+        carm_frame: p.carm_frame,
     })
 }
 
@@ -531,7 +518,7 @@ impl Component for CameraDriverNode {
         ]
     }
     fn declarations(&self) -> Vec<ParamDecl> {
-        declarations()
+        CameraDriverParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         self.cfg = config(p)?;
@@ -707,6 +694,7 @@ mod tests {
     use crate::components::{build, declarations};
     use std::cell::RefCell;
     use std::rc::Rc;
+    use xsurf_runtime::params::ParamValue as V;
     use xsurf_runtime::router::Router;
 
     #[test]

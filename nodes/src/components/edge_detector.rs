@@ -1,6 +1,5 @@
 //! `edge_detector`: `image_raw` -> `laser_line`, one sample per image row (or column).
 
-use super::decl;
 use crate::convert;
 use std::sync::Arc;
 use xsurf_core::edge::{Channel, EdgeConfig, EdgeDetector, LaserLine, Method, Orientation, Roi};
@@ -11,179 +10,111 @@ use xsurf_msgs::xsurf_msgs::LaserLine as LineMsg;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
 
-/// The parameters of `edge_detector`.
-pub fn declarations() -> Vec<ParamDecl> {
-    let d = EdgeConfig::default();
-    vec![
-        decl(
-            "image_transport",
-            V::String("raw".into()),
-            "",
-            "how images arrive: raw (image_raw, sensor_msgs/Image) or compressed (image_raw/compressed, sensor_msgs/CompressedImage, jpeg or png, decoded here); fixed at start",
-        ),
-        decl(
-            "method",
-            V::String("center_of_gravity".into()),
-            "",
-            "center_of_gravity, gaussian, parabolic, or gradient (the study's method)",
-        ),
-        decl(
-            "line_orientation",
-            V::String("vertical".into()),
-            "",
-            "vertical: one sample per image row; horizontal: one per column",
-        ),
-        decl(
-            "channel",
-            V::String("red_minus_others".into()),
-            "",
-            "signal of colour images: red_minus_others (the laser's colour against the others), red, luma",
-        ),
-        decl("roi.x_offset", V::Integer(0), "px", "first column searched"),
-        decl("roi.y_offset", V::Integer(0), "px", "first row searched"),
-        decl("roi.width", V::Integer(0), "px", "columns searched (0: to the edge)"),
-        decl("roi.height", V::Integer(0), "px", "rows searched (0: to the edge)"),
-        decl(
-            "min_strength",
-            V::from_f32(d.min_strength),
-            "grey levels",
-            "smallest peak height above the local background (8-bit scale)",
-        ),
-        decl(
-            "noise_factor",
-            V::from_f32(d.noise_factor),
-            "",
-            "the peak must also exceed this many local noise standard deviations",
-        ),
-        decl(
-            "peak_fraction",
-            V::from_f32(d.peak_fraction),
-            "",
-            "samples above background + this fraction of the peak take part in the centre",
-        ),
-        decl(
-            "max_half_width_px",
-            V::Integer(d.max_half_width_px.into()),
-            "px",
-            "largest half-width searched around a peak",
-        ),
-        decl("flank_px", V::Integer(d.flank_px.into()), "px", "length of each background flank"),
-        decl("max_width_px", V::from_f32(d.max_width_px), "px", "wider peaks (FWHM) are rejected as smeared"),
-        decl(
-            "min_width_px",
-            V::from_f32(d.min_width_px),
-            "px",
-            "narrower peaks (FWHM) are rejected: set it for a camera whose line is wide (edge overshoot, fine texture)",
-        ),
-        decl(
-            "gradient_threshold",
-            V::from_f32(d.gradient_threshold),
-            "grey levels",
-            "for method gradient: the five-pixel rise that marks the line",
-        ),
-        decl(
-            "color_offset_px",
-            V::from_f32(d.color_offset_px),
-            "px",
-            "colour is sampled this far either side of the line",
-        ),
-        decl(
-            "min_side_ratio",
-            V::from_f32(d.min_side_ratio),
-            "",
-            "a line rises above the background on both sides: the lower rise is at least this fraction of the higher (a step is not a line)",
-        ),
-        decl(
-            "narrow_width_px",
-            V::from_f32(d.narrow_width_px),
-            "px",
-            "lines narrower than this (FWHM) are located by a pixel-integrated Gaussian fit, whatever the method (no pixel locking)",
-        ),
-        decl(
-            "max_candidates",
-            V::Integer(d.max_candidates.into()),
-            "",
-            "peaks tried per row until one passes every test: the brightest, the one of highest contrast, then the next brightest",
-        ),
-        decl(
-            "min_run",
-            V::Integer(d.min_run.into()),
-            "rows",
-            "a line runs along at least this many consecutive rows (columns); shorter runs are dropped, and so are runs under 4 times this that are shorter than twice their width or much wider than the line was in the last frames (highlights, marks)",
-        ),
-        decl(
-            "max_jump_px",
-            V::from_f32(d.max_jump_px),
-            "px",
-            "largest step of the line centre between neighbouring rows (columns) of one run",
-        ),
-    ]
+/// The detector's defaults (core's), which the declarations show.
+const D: EdgeConfig = EdgeConfig::DEFAULT;
+
+xsurf_runtime::parameters! {
+    /// The parameters of `edge_detector`.
+    pub struct EdgeParams {
+        /// how images arrive: raw (image_raw, sensor_msgs/Image) or compressed
+        /// (image_raw/compressed, sensor_msgs/CompressedImage, jpeg or png, decoded here); fixed at start
+        image_transport: Transport = Transport::Raw, via Choice;
+        /// center_of_gravity, gaussian, parabolic, or gradient (the study's method)
+        method: Method = D.method, via Choice;
+        /// vertical: one sample per image row; horizontal: one per column
+        line_orientation: Orientation = D.line_orientation, via Choice;
+        /// signal of colour images: red_minus_others (the laser's colour against the others), red, luma
+        channel: Channel = D.channel, via Choice;
+        /// first column searched
+        roi_x_offset ["roi.x_offset"]: u32 = D.roi.x_offset, unit "px";
+        /// first row searched
+        roi_y_offset ["roi.y_offset"]: u32 = D.roi.y_offset, unit "px";
+        /// columns searched (0: to the edge)
+        roi_width ["roi.width"]: u32 = D.roi.width, unit "px";
+        /// rows searched (0: to the edge)
+        roi_height ["roi.height"]: u32 = D.roi.height, unit "px";
+        /// smallest peak height above the local background (8-bit scale)
+        min_strength: f32 = D.min_strength, unit "grey levels";
+        /// the peak must also exceed this many local noise standard deviations
+        noise_factor: f32 = D.noise_factor;
+        /// samples above background + this fraction of the peak take part in the centre
+        peak_fraction: f32 = D.peak_fraction;
+        /// largest half-width searched around a peak
+        max_half_width_px: u32 = D.max_half_width_px, unit "px";
+        /// length of each background flank
+        flank_px: u32 = D.flank_px, unit "px";
+        /// wider peaks (FWHM) are rejected as smeared
+        max_width_px: f32 = D.max_width_px, unit "px";
+        /// narrower peaks (FWHM) are rejected: set it for a camera whose line is wide (edge
+        /// overshoot, fine texture)
+        min_width_px: f32 = D.min_width_px, unit "px";
+        /// for method gradient: the five-pixel rise that marks the line
+        gradient_threshold: f32 = D.gradient_threshold, unit "grey levels";
+        /// colour is sampled this far either side of the line
+        color_offset_px: f32 = D.color_offset_px, unit "px";
+        /// a line rises above the background on both sides: the lower rise is at least this
+        /// fraction of the higher (a step is not a line)
+        min_side_ratio: f32 = D.min_side_ratio;
+        /// lines narrower than this (FWHM) are located by a pixel-integrated Gaussian fit,
+        /// whatever the method (no pixel locking)
+        narrow_width_px: f32 = D.narrow_width_px, unit "px";
+        /// peaks tried per row until one passes every test: the brightest, the one of highest
+        /// contrast, then the next brightest
+        max_candidates: u32 = D.max_candidates;
+        /// a line runs along at least this many consecutive rows (columns); shorter runs are
+        /// dropped, and so are runs under 4 times this that are shorter than twice their width
+        /// or much wider than the line was in the last frames (highlights, marks)
+        min_run: u32 = D.min_run, unit "rows";
+        /// largest step of the line centre between neighbouring rows (columns) of one run
+        max_jump_px: f32 = D.max_jump_px, unit "px";
+    }
 }
 
-fn u32_param(p: &Params, name: &str) -> Result<u32, ParamError> {
-    let v = p.i64(name)?;
-    u32::try_from(v).map_err(|_| Params::invalid(name, format!("{v} is not in 0..=4294967295")))
+impl EdgeParams {
+    /// The detector's configuration, checked as core checks it.
+    pub fn config(&self) -> Result<EdgeConfig, ParamError> {
+        let c = EdgeConfig {
+            method: self.method,
+            line_orientation: self.line_orientation,
+            channel: self.channel,
+            roi: Roi {
+                x_offset: self.roi_x_offset,
+                y_offset: self.roi_y_offset,
+                width: self.roi_width,
+                height: self.roi_height,
+            },
+            min_strength: self.min_strength,
+            noise_factor: self.noise_factor,
+            peak_fraction: self.peak_fraction,
+            max_half_width_px: self.max_half_width_px,
+            flank_px: self.flank_px,
+            max_width_px: self.max_width_px,
+            min_width_px: self.min_width_px,
+            gradient_threshold: self.gradient_threshold,
+            color_offset_px: self.color_offset_px,
+            min_side_ratio: self.min_side_ratio,
+            narrow_width_px: self.narrow_width_px,
+            max_candidates: self.max_candidates,
+            min_run: self.min_run,
+            max_jump_px: self.max_jump_px,
+        };
+        c.validate().map_err(|e| match e {
+            xsurf_core::edge::EdgeError::InvalidConfig { name, reason } => Params::invalid(name, reason),
+            other => Params::invalid("edge_detector", other.to_string()),
+        })?;
+        Ok(c)
+    }
 }
 
-/// The typed configuration from parameters (also the run-time validator).
-pub fn config(p: &Params) -> Result<EdgeConfig, ParamError> {
-    let method = p.string("method")?;
-    let orient = p.string("line_orientation")?;
-    let channel = p.string("channel")?;
-    let c = EdgeConfig {
-        method: Method::parse(&method)
-            .ok_or_else(|| Params::invalid("method", format!("unknown method {method:?}")))?,
-        line_orientation: Orientation::parse(&orient)
-            .ok_or_else(|| Params::invalid("line_orientation", format!("{orient:?} is not vertical or horizontal")))?,
-        channel: Channel::parse(&channel)
-            .ok_or_else(|| Params::invalid("channel", format!("unknown channel {channel:?}")))?,
-        roi: Roi {
-            x_offset: u32_param(p, "roi.x_offset")?,
-            y_offset: u32_param(p, "roi.y_offset")?,
-            width: u32_param(p, "roi.width")?,
-            height: u32_param(p, "roi.height")?,
-        },
-        min_strength: p.f64("min_strength")? as f32,
-        noise_factor: p.f64("noise_factor")? as f32,
-        peak_fraction: p.f64("peak_fraction")? as f32,
-        max_half_width_px: u32_param(p, "max_half_width_px")?,
-        flank_px: u32_param(p, "flank_px")?,
-        max_width_px: p.f64("max_width_px")? as f32,
-        min_width_px: p.f64("min_width_px")? as f32,
-        gradient_threshold: p.f64("gradient_threshold")? as f32,
-        color_offset_px: p.f64("color_offset_px")? as f32,
-        min_side_ratio: p.f64("min_side_ratio")? as f32,
-        narrow_width_px: p.f64("narrow_width_px")? as f32,
-        max_candidates: u32_param(p, "max_candidates")?,
-        min_run: u32_param(p, "min_run")?,
-        max_jump_px: p.f64("max_jump_px")? as f32,
-    };
-    c.validate().map_err(|e| match e {
-        xsurf_core::edge::EdgeError::InvalidConfig { name, reason } => Params::invalid(name, reason),
-        other => Params::invalid("edge_detector", other.to_string()),
-    })?;
-    Ok(c)
-}
-
-/// How a camera's images arrive (image_transport's transports).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Transport {
-    /// `image_raw`, `sensor_msgs/msg/Image`.
-    Raw,
-    /// `image_raw/compressed`, `sensor_msgs/msg/CompressedImage` (JPEG or PNG).
-    Compressed,
-}
-
-impl Transport {
-    /// From the `image_transport` parameter.
-    pub fn from_params(p: &Params) -> Result<Transport, ParamError> {
-        match p.string("image_transport")?.as_str() {
-            "raw" => Ok(Transport::Raw),
-            "compressed" => Ok(Transport::Compressed),
-            other => Err(Params::invalid("image_transport", format!("{other:?}: raw or compressed"))),
-        }
+xsurf_runtime::choice! {
+    /// How a camera's images arrive (image_transport's transports).
+    pub enum Transport {
+        /// `image_raw`, `sensor_msgs/msg/Image`.
+        Raw = "raw",
+        /// `image_raw/compressed`, `sensor_msgs/msg/CompressedImage` (JPEG or PNG).
+        Compressed = "compressed",
     }
 }
 
@@ -212,9 +143,10 @@ const OUT_REPORT: usize = 1;
 impl EdgeDetectorNode {
     /// Builds the node from its parameters.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
-        let detector = EdgeDetector::new(config(p)?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
+        let p = EdgeParams::from_params(p)?;
+        let detector = EdgeDetector::new(p.config()?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
         Ok(Self {
-            transport: Transport::from_params(p)?,
+            transport: p.image_transport,
             detector,
             line: LaserLine::default(),
             frames: 0,
@@ -295,13 +227,14 @@ impl Component for EdgeDetectorNode {
         ]
     }
     fn declarations(&self) -> Vec<ParamDecl> {
-        declarations()
+        EdgeParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
-        if Transport::from_params(p)? != self.transport {
+        let p = EdgeParams::from_params(p)?;
+        if p.image_transport != self.transport {
             return Err(Params::invalid("image_transport", "fixed at start (it chooses the subscription)"));
         }
-        self.detector = EdgeDetector::new(config(p)?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
+        self.detector = EdgeDetector::new(p.config()?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
         Ok(())
     }
     fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
@@ -380,7 +313,7 @@ mod tests {
     /// the camera's own images go on (issue 24: one bad message costs only itself).
     #[test]
     fn images_that_contradict_camera_info_are_refused() {
-        let params = Params::resolve(&declarations(), &Default::default()).unwrap();
+        let params = Params::resolve(&EdgeParams::declarations(), &Default::default()).unwrap();
         let mut n = EdgeDetectorNode::new(&params).unwrap();
         let mut out = Outbox::default();
         // Before any camera_info, an image is taken as it is.

@@ -21,7 +21,6 @@
 //! and `preview.png`, with `xray.png` beside them; one that arrives after the merge (a
 //! radiograph loaded later) rewrites that scan's scene files.
 
-use super::decl;
 use crate::convert;
 use crate::tf::TfBuffer;
 use std::collections::BTreeMap;
@@ -42,94 +41,55 @@ use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
 
-/// The parameters of `merger`.
-pub fn declarations() -> Vec<ParamDecl> {
-    let d = MeshConfig::default();
-    vec![
-        decl(
-            "cameras",
-            V::StringArray(vec!["cam1".into(), "cam2".into()]),
-            "",
-            "camera namespaces whose /<cam>/cloud are merged",
-        ),
-        decl("merge_delay_s", V::Double(1.0), "s", "wait after END before merging, so the final clouds arrive first"),
-        decl("max_edge_m", V::from_f32(d.max_edge_m), "m", "longest triangle edge when meshing each camera's grid"),
-        decl("min_angle_deg", V::from_f32(d.min_angle_deg), "deg", "smallest triangle angle"),
-        decl(
-            "fuse_distance_m",
-            V::from_f32(FuseConfig::default().min_distance_m),
-            "m",
-            "where cameras overlap, samples of different cameras closer than this are one observation: the \
-             region's better-lit camera keeps it, averaged with the other's (0: keep both layers)",
-        ),
-        decl(
-            "zipper",
-            V::Bool(true),
-            "",
-            "stitch the seams between the cameras' surfaces in the merged mesh (triangles within max_edge_m and \
-             min_angle_deg)",
-        ),
-        decl(
-            "max_hole_edges",
-            V::Integer(64),
-            "",
-            "after zippering, each hole in the merged surface bounded by at most this many edges is closed with \
-             triangles whose new edges are within max_edge_m; wider holes and the outer rim stay open (0: none)",
-        ),
-        decl(
-            "refine",
-            V::Bool(true),
-            "",
-            "refine each further camera's placement against the first camera's surface (false: calibration only)",
-        ),
-        decl(
-            "laser_plane",
-            V::DoubleArray(vec![0.0, 1.0, 0.0, 0.0]),
-            "m",
-            "the laser plane in carm, [nx, ny, nz, d], as the triangulators have it (the refinement re-triangulates)",
-        ),
-        decl(
-            "refine_max_translation_m",
-            V::Double(RefineConfig::default().max_translation_m),
-            "m",
-            "a refinement that moves a camera further than this is refused",
-        ),
-        decl(
-            "refine_max_rotation_deg",
-            V::Double(RefineConfig::default().max_rotation_deg),
-            "deg",
-            "a refinement that turns a camera further than this is refused",
-        ),
-        decl(
-            "refine_max_rms_m",
-            V::Double(RefineConfig::default().max_rms_m),
-            "m",
-            "a refinement whose RMS point-to-plane residual stays above this is refused",
-        ),
-        decl(
-            "save_rig_file",
-            V::String(String::new()),
-            "",
-            "if set, each refined placement is written into this rig file (atomically), for the next scans",
-        ),
-        decl("transparency", V::Double(0.3), "", "surface transparency in the VRML and glTF scenes, 0..1"),
-        decl(
-            "output_dir",
-            V::String(String::new()),
-            "",
-            "if set, each scan's merged.ply, scene.wrl and scene.glb go to <output_dir>/scan_<id>/",
-        ),
-        decl("frame_id", V::String("table".into()), "", "frame of the merged cloud and mesh"),
-        decl(
-            "republish_s",
-            V::Double(2.0),
-            "s",
-            "the merged cloud and mesh are published again this often until the next scan, for viewers \
-             that join late or lose them (best effort) (0: once)",
-        ),
-    ]
+xsurf_runtime::parameters! {
+    /// The parameters of `merger`.
+    pub struct MergerParams {
+        /// camera namespaces whose /<cam>/cloud are merged
+        cameras: Vec<String> = vec!["cam1".into(), "cam2".into()];
+        /// wait after END before merging, so the final clouds arrive first
+        merge_delay_s: f64 = 1.0, unit "s", range 0.0..=600.0;
+        /// longest triangle edge when meshing each camera's grid
+        max_edge_m: f32 = MeshConfig::DEFAULT.max_edge_m, unit "m";
+        /// smallest triangle angle
+        min_angle_deg: f32 = MeshConfig::DEFAULT.min_angle_deg, unit "deg";
+        /// where cameras overlap, samples of different cameras closer than this are one
+        /// observation: the region's better-lit camera keeps it, averaged with the other's (0:
+        /// keep both layers)
+        fuse_distance_m: f32 = FuseConfig::DEFAULT.min_distance_m, unit "m", range 0.0..=0.05;
+        /// stitch the seams between the cameras' surfaces in the merged mesh (triangles within
+        /// max_edge_m and min_angle_deg)
+        zipper: bool = true;
+        /// after zippering, each hole in the merged surface bounded by at most this many edges
+        /// is closed with triangles whose new edges are within max_edge_m; wider holes and the
+        /// outer rim stay open (0: none)
+        max_hole_edges: usize = 64, range 0..=100_000;
+        /// refine each further camera's placement against the first camera's surface (false:
+        /// calibration only)
+        refine: bool = true;
+        /// the laser plane in carm, [nx, ny, nz, d], as the triangulators have it (the
+        /// refinement re-triangulates)
+        laser_plane: Vec<f64> = vec![0.0, 1.0, 0.0, 0.0], unit "m";
+        /// a refinement that moves a camera further than this is refused
+        refine_max_translation_m: f64 = RefineConfig::DEFAULT.max_translation_m, unit "m";
+        /// a refinement that turns a camera further than this is refused
+        refine_max_rotation_deg: f64 = RefineConfig::DEFAULT.max_rotation_deg, unit "deg";
+        /// a refinement whose RMS point-to-plane residual stays above this is refused
+        refine_max_rms_m: f64 = RefineConfig::DEFAULT.max_rms_m, unit "m";
+        /// if set, each refined placement is written into this rig file (atomically), for the
+        /// next scans
+        save_rig_file: Option<PathBuf> = None;
+        /// surface transparency in the VRML and glTF scenes, 0..1
+        transparency: f32 = 0.3, range 0.0..=1.0;
+        /// if set, each scan's merged.ply, scene.wrl and scene.glb go to <output_dir>/scan_<id>/
+        output_dir: Option<PathBuf> = None;
+        /// frame of the merged cloud and mesh
+        frame_id: String = "table".into();
+        /// the merged cloud and mesh are published again this often until the next scan, for
+        /// viewers that join late or lose them (best effort) (0: once)
+        republish_s: f64 = 2.0, unit "s", range 0.0..=3600.0;
+    }
 }
 
 /// The scan's C-arm motion, from `table -> carm` on `/tf`.
@@ -161,36 +121,17 @@ struct Config {
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
-    let cameras = p.string_array("cameras")?;
+    let p = MergerParams::from_params(p)?;
+    let cameras = p.cameras;
     if cameras.is_empty() || cameras.iter().any(|c| c.is_empty() || c.contains(char::is_whitespace)) {
         return Err(Params::invalid("cameras", format!("{cameras:?}: needs one or more camera names")));
     }
-    let delay = p.f64("merge_delay_s")?;
-    if !(0.0..=600.0).contains(&delay) {
-        return Err(Params::invalid("merge_delay_s", format!("{delay:?} is not in [0, 600]")));
-    }
-    let mesh = MeshConfig {
-        max_edge_m: p.f64("max_edge_m")? as f32,
-        min_angle_deg: p.f64("min_angle_deg")? as f32,
-        ..MeshConfig::default()
-    };
+    let mesh = MeshConfig { max_edge_m: p.max_edge_m, min_angle_deg: p.min_angle_deg, ..MeshConfig::default() };
     mesh.validate().map_err(|e| Params::invalid("merger", e))?;
-    let fuse = p.f64("fuse_distance_m")?;
-    if !(0.0..=0.05).contains(&fuse) {
-        return Err(Params::invalid("fuse_distance_m", format!("{fuse:?} is not in [0, 0.05]")));
-    }
-    let transparency = p.f64("transparency")?;
-    if !(0.0..=1.0).contains(&transparency) {
-        return Err(Params::invalid("transparency", format!("{transparency:?} is not in [0, 1]")));
-    }
-    let dir = p.string("output_dir")?;
-    let plane = p.f64_array("laser_plane")?;
-    let plane = <[f64; 4]>::try_from(plane.as_slice())
-        .ok()
-        .and_then(Plane::from_params)
+    let plane = super::triangulator::laser_plane("laser_plane", &p.laser_plane)?;
+    let plane = Plane::from_params(plane)
         .ok_or_else(|| Params::invalid("laser_plane", format!("{plane:?}: needs [nx, ny, nz, d] with |n| = 1")))?;
-    let positive = |name: &str| -> Result<f64, ParamError> {
-        let v = p.f64(name)?;
+    let positive = |name: &str, v: f64| -> Result<f64, ParamError> {
         if v > 0.0 && v.is_finite() {
             Ok(v)
         } else {
@@ -198,37 +139,24 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         }
     };
     let refine_cfg = RefineConfig {
-        max_translation_m: positive("refine_max_translation_m")?,
-        max_rotation_deg: positive("refine_max_rotation_deg")?,
-        max_rms_m: positive("refine_max_rms_m")?,
+        max_translation_m: positive("refine_max_translation_m", p.refine_max_translation_m)?,
+        max_rotation_deg: positive("refine_max_rotation_deg", p.refine_max_rotation_deg)?,
+        max_rms_m: positive("refine_max_rms_m", p.refine_max_rms_m)?,
         ..RefineConfig::default()
     };
-    let save = p.string("save_rig_file")?;
     Ok(Config {
-        refine: p.bool("refine")?.then_some((refine_cfg, plane)),
-        save_rig_file: (!save.is_empty()).then(|| PathBuf::from(save)),
+        refine: p.refine.then_some((refine_cfg, plane)),
+        save_rig_file: p.save_rig_file,
         cameras,
-        delay_ns: (delay * 1e9) as i64,
+        delay_ns: (p.merge_delay_s * 1e9) as i64,
         mesh,
-        fuse: FuseConfig { min_distance_m: fuse as f32, mesh, ..FuseConfig::default() },
-        zipper: p.bool("zipper")?,
-        max_hole_edges: {
-            let n = p.i64("max_hole_edges")?;
-            usize::try_from(n)
-                .ok()
-                .filter(|&n| n <= 100_000)
-                .ok_or_else(|| Params::invalid("max_hole_edges", format!("must be in 0..=100000, got {n}")))?
-        },
-        transparency: transparency as f32,
-        output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
-        frame_id: p.string("frame_id")?,
-        republish_ns: {
-            let r = p.f64("republish_s")?;
-            if !(0.0..=3600.0).contains(&r) {
-                return Err(Params::invalid("republish_s", format!("{r:?} is not in [0, 3600]")));
-            }
-            (r > 0.0).then_some((r * 1e9) as i64)
-        },
+        fuse: FuseConfig { min_distance_m: p.fuse_distance_m, mesh, ..FuseConfig::default() },
+        zipper: p.zipper,
+        max_hole_edges: p.max_hole_edges,
+        transparency: p.transparency,
+        output_dir: p.output_dir,
+        frame_id: p.frame_id,
+        republish_ns: (p.republish_s > 0.0).then_some((p.republish_s * 1e9) as i64),
     })
 }
 
@@ -761,7 +689,7 @@ impl Component for MergerNode {
         ]
     }
     fn declarations(&self) -> Vec<ParamDecl> {
-        declarations()
+        MergerParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         let c = config(p)?;
@@ -903,7 +831,7 @@ mod tests {
     /// whole turn, not the 1.55 degrees (or at most 180) between the first and the last pose.
     #[test]
     fn a_turn_is_reported_in_full() {
-        let params = Params::resolve(&declarations(), &BTreeMap::new()).unwrap();
+        let params = Params::resolve(&MergerParams::declarations(), &BTreeMap::new()).unwrap();
         let mut m = MergerNode::new(&params).unwrap();
         let steps = 200;
         let total = 358.45f64.to_radians();
@@ -926,7 +854,7 @@ mod tests {
     #[test]
     fn clouds_that_contradict_the_camera_or_the_scan_are_refused() {
         use xsurf_core::triangulate::Profile;
-        let params = Params::resolve(&declarations(), &Default::default()).unwrap();
+        let params = Params::resolve(&MergerParams::declarations(), &Default::default()).unwrap();
         let mut m = MergerNode::new(&params).unwrap();
         let mut out = Outbox::default();
         let n = m.cfg.cameras.len();

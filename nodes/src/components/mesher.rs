@@ -7,7 +7,6 @@
 //! Gaps in the frame stamps are counted as dropped frames, logged, and kept as
 //! empty grid columns so the mesh does not bridge them (a single missing frame is filled).
 
-use super::decl;
 use crate::convert;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -20,88 +19,50 @@ use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
 
-/// The parameters of `mesher`.
-pub fn declarations() -> Vec<ParamDecl> {
-    let d = MeshConfig::default();
-    vec![
-        decl("max_edge_m", V::from_f32(d.max_edge_m), "m", "longest triangle edge"),
-        decl(
-            "max_edge_per_m",
-            V::from_f32(d.max_edge_per_m),
-            "m/m",
-            "extra edge length per metre of camera range (PCL's depth term)",
-        ),
-        decl("min_angle_deg", V::from_f32(d.min_angle_deg), "deg", "smallest triangle angle (the study used 12)"),
-        decl(
-            "fill_single_holes",
-            V::Bool(d.fill_single_holes),
-            "",
-            "fill isolated single missing points by interpolation",
-        ),
-        decl(
-            "outlier_tolerance_m",
-            V::from_f32(d.outlier_tolerance_m),
-            "m",
-            "a point that its grid neighbours (along its frame or across frames) miss by more than this \
-             is rejected before meshing and counted: a wrong peak, a highlight, an occlusion edge's mixed \
-             pixel (0: keep every point)",
-        ),
-        decl(
-            "smooth_iterations",
-            V::Integer(d.smooth_iterations.into()),
-            "",
-            "Laplacian smoothing passes (boundary kept)",
-        ),
-        decl("smooth_lambda", V::from_f32(d.smooth_lambda), "", "Laplacian step, (0, 1]"),
-        decl(
-            "cloud_rate_hz",
-            V::Double(2.0),
-            "Hz",
-            "how often the growing cloud is published during a scan (0: only at END)",
-        ),
-        decl(
-            "mesh_republish_s",
-            V::Double(2.0),
-            "s",
-            "after END the mesh marker is published again this often until the next scan, so viewers \
-             that join late or lose it (best effort) get it (0: once)",
-        ),
-        decl(
-            "output_dir",
-            V::String(String::new()),
-            "",
-            "if set, each scan's mesh is written to <output_dir>/scan_<id>/<camera>.ply",
-        ),
-        decl(
-            "camera",
-            V::String(String::new()),
-            "",
-            "camera name for files and markers (default: the node's namespace)",
-        ),
-        decl("frame_id", V::String("table".into()), "", "frame of the clouds and meshes"),
-        decl(
-            "gap_factor",
-            V::Double(1.5),
-            "",
-            "a stamp gap above this many nominal frame periods counts as dropped frames",
-        ),
-        decl(
-            "end_grace_s",
-            V::Double(0.3),
-            "s",
-            "after END or ABORT, profiles stamped before it (exposed in the scan, still on their way) \
-             are taken for this long before the scan is closed (0: close at END)",
-        ),
-        decl(
-            "line_orientation",
-            V::String("vertical".into()),
-            "",
-            "as the edge detector's: vertical (a sample per image row) or horizontal (per column); with \
-             camera_info it gives the samples per frame, and a profile of another size is refused",
-        ),
-    ]
+/// The mesh's defaults (core's), which the declarations show.
+const D: MeshConfig = MeshConfig::DEFAULT;
+
+xsurf_runtime::parameters! {
+    /// The parameters of `mesher`.
+    pub struct MesherParams {
+        /// longest triangle edge
+        max_edge_m: f32 = D.max_edge_m, unit "m";
+        /// extra edge length per metre of camera range (PCL's depth term)
+        max_edge_per_m: f32 = D.max_edge_per_m, unit "m/m";
+        /// smallest triangle angle (the study used 12)
+        min_angle_deg: f32 = D.min_angle_deg, unit "deg";
+        /// fill isolated single missing points by interpolation
+        fill_single_holes: bool = D.fill_single_holes;
+        /// a point that its grid neighbours (along its frame or across frames) miss by more than
+        /// this is rejected before meshing and counted: a wrong peak, a highlight, an occlusion
+        /// edge's mixed pixel (0: keep every point)
+        outlier_tolerance_m: f32 = D.outlier_tolerance_m, unit "m";
+        /// Laplacian smoothing passes (boundary kept)
+        smooth_iterations: u32 = D.smooth_iterations;
+        /// Laplacian step, (0, 1]
+        smooth_lambda: f32 = D.smooth_lambda;
+        /// how often the growing cloud is published during a scan (0: only at END)
+        cloud_rate_hz: f64 = 2.0, unit "Hz", range 0.0..=1000.0;
+        /// after END the mesh marker is published again this often until the next scan, so
+        /// viewers that join late or lose it (best effort) get it (0: once)
+        mesh_republish_s: f64 = 2.0, unit "s", range 0.0..=3600.0;
+        /// if set, each scan's mesh is written to <output_dir>/scan_<id>/<camera>.ply
+        output_dir: Option<PathBuf> = None;
+        /// camera name for files and markers (default: the node's namespace)
+        camera: String = String::new();
+        /// frame of the clouds and meshes
+        frame_id: String = "table".into();
+        /// a stamp gap above this many nominal frame periods counts as dropped frames
+        gap_factor: f64 = 1.5;
+        /// after END or ABORT, profiles stamped before it (exposed in the scan, still on their
+        /// way) are taken for this long before the scan is closed (0: close at END)
+        end_grace_s: f64 = 0.3, unit "s", range 0.0..=10.0;
+        /// as the edge detector's: vertical (a sample per image row) or horizontal (per column);
+        /// with camera_info it gives the samples per frame, and a profile of another size is refused
+        line_orientation: Orientation = Orientation::Vertical, via Choice;
+    }
 }
 
 struct Config {
@@ -117,48 +78,31 @@ struct Config {
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
-    let smooth = p.i64("smooth_iterations")?;
+    let p = MesherParams::from_params(p)?;
     let mesh = MeshConfig {
-        max_edge_m: p.f64("max_edge_m")? as f32,
-        max_edge_per_m: p.f64("max_edge_per_m")? as f32,
-        min_angle_deg: p.f64("min_angle_deg")? as f32,
-        fill_single_holes: p.bool("fill_single_holes")?,
-        outlier_tolerance_m: p.f64("outlier_tolerance_m")? as f32,
-        smooth_iterations: u32::try_from(smooth)
-            .map_err(|_| Params::invalid("smooth_iterations", format!("{smooth:?} < 0")))?,
-        smooth_lambda: p.f64("smooth_lambda")? as f32,
+        max_edge_m: p.max_edge_m,
+        max_edge_per_m: p.max_edge_per_m,
+        min_angle_deg: p.min_angle_deg,
+        fill_single_holes: p.fill_single_holes,
+        outlier_tolerance_m: p.outlier_tolerance_m,
+        smooth_iterations: p.smooth_iterations,
+        smooth_lambda: p.smooth_lambda,
     };
     mesh.validate().map_err(|e| Params::invalid("mesher", e))?;
-    let rate = p.f64("cloud_rate_hz")?;
-    if !(0.0..=1000.0).contains(&rate) {
-        return Err(Params::invalid("cloud_rate_hz", format!("{rate:?} is not in [0, 1000]")));
+    if !(p.gap_factor > 1.0) {
+        return Err(Params::invalid("gap_factor", format!("{:?} must be > 1", p.gap_factor)));
     }
-    let gap_factor = p.f64("gap_factor")?;
-    if !(gap_factor > 1.0) {
-        return Err(Params::invalid("gap_factor", format!("{gap_factor:?} must be > 1")));
-    }
-    let grace = p.f64("end_grace_s")?;
-    if !(0.0..=10.0).contains(&grace) {
-        return Err(Params::invalid("end_grace_s", format!("{grace:?} is not in [0, 10]")));
-    }
-    let orient = p.string("line_orientation")?;
-    let orientation = Orientation::parse(&orient)
-        .ok_or_else(|| Params::invalid("line_orientation", format!("{orient:?} is not vertical or horizontal")))?;
-    let dir = p.string("output_dir")?;
-    let republish = p.f64("mesh_republish_s")?;
-    if !(0.0..=3600.0).contains(&republish) {
-        return Err(Params::invalid("mesh_republish_s", format!("{republish:?} is not in [0, 3600]")));
-    }
+    let seconds = |s: f64| (s > 0.0).then_some((s * 1e9) as i64);
     Ok(Config {
         mesh,
-        cloud_period_ns: (rate > 0.0).then(|| (1e9 / rate) as i64),
-        republish_ns: (republish > 0.0).then_some((republish * 1e9) as i64),
-        output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
-        camera: p.string("camera")?,
-        frame_id: p.string("frame_id")?,
-        gap_factor,
-        end_grace_ns: (grace * 1e9) as i64,
-        orientation,
+        cloud_period_ns: (p.cloud_rate_hz > 0.0).then(|| (1e9 / p.cloud_rate_hz) as i64),
+        republish_ns: seconds(p.mesh_republish_s),
+        output_dir: p.output_dir,
+        camera: p.camera,
+        frame_id: p.frame_id,
+        gap_factor: p.gap_factor,
+        end_grace_ns: (p.end_grace_s * 1e9) as i64,
+        orientation: p.line_orientation,
     })
 }
 
@@ -468,7 +412,7 @@ impl Component for MesherNode {
         ]
     }
     fn declarations(&self) -> Vec<ParamDecl> {
-        declarations()
+        MesherParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         self.cfg = config(p)?;
@@ -622,7 +566,7 @@ mod tests {
     /// A mesher with its defaults that has the camera_info of a 64x40 camera.
     fn mesher_of_a_64x40_camera() -> (MesherNode, Outbox) {
         #![allow(clippy::unwrap_used)]
-        let params = Params::resolve(&declarations(), &Default::default()).unwrap();
+        let params = Params::resolve(&MesherParams::declarations(), &Default::default()).unwrap();
         let mut m = MesherNode::new(&params).unwrap();
         let mut out = Outbox::default();
         let info = CameraInfo { width: 64, height: 40, ..Default::default() };

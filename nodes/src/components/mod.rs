@@ -12,17 +12,8 @@ pub mod triangulator;
 pub mod xray_aligner;
 
 use xsurf_runtime::component::{Component, Msg, Outbox};
-use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue, Params};
-
-/// A parameter declaration.
-pub(crate) fn decl(
-    name: &'static str,
-    default: ParamValue,
-    unit: &'static str,
-    description: &'static str,
-) -> ParamDecl {
-    ParamDecl { name, default, unit, description }
-}
+use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, ParamValue, Params};
+use xsurf_runtime::rosargs::RosArgs;
 
 /// Outputs published again at a fixed period until cleared, as a latched topic would be for
 /// viewers that join late or lose a large best-effort message (the mesher's and merger's
@@ -71,15 +62,38 @@ pub const NODE_NAMES: [&str; 7] =
 /// The declarations of a node by name (for docs and `ros2 param` services).
 pub fn declarations(node: &str) -> Option<Vec<ParamDecl>> {
     Some(match node {
-        "camera_driver" => camera_driver::declarations(),
-        "c_arm_pose" => c_arm_pose::declarations(),
-        "edge_detector" => edge_detector::declarations(),
-        "triangulator" => triangulator::declarations(),
-        "mesher" => mesher::declarations(),
-        "merger" => merger::declarations(),
-        "xray_aligner" => xray_aligner::declarations(),
+        "camera_driver" => camera_driver::CameraDriverParams::declarations(),
+        "c_arm_pose" => c_arm_pose::CArmPoseParams::declarations(),
+        "edge_detector" => edge_detector::EdgeParams::declarations(),
+        "triangulator" => triangulator::TriangulatorParams::declarations(),
+        "mesher" => mesher::MesherParams::declarations(),
+        "merger" => merger::MergerParams::declarations(),
+        "xray_aligner" => xray_aligner::XrayAlignerParams::declarations(),
         _ => return None,
     })
+}
+
+/// The parameters of the node `node` placed as `fq`, as every host resolves them (the node
+/// executables, `xsurf compose`, `xsurf reconstruct`): the node's and the host's declarations,
+/// overridden by the params files and `-p` rules of `ros` that match `fq`, then by `extra` (what
+/// the host itself sets). A rule naming a parameter the node does not declare is logged.
+pub fn resolve(
+    node: &str,
+    fq: &str,
+    ros: &RosArgs,
+    extra: &[(&str, ParamValue)],
+) -> Result<(Vec<ParamDecl>, Params), String> {
+    let mut decls = declarations(node).ok_or_else(|| format!("{fq}: node type {node} has no component"))?;
+    decls.extend(xsurf_runtime::dds::host_declarations());
+    let mut overrides = ros.param_overrides(fq).map_err(|e| format!("{fq}: {e}"))?;
+    for n in ros.explicit_param_names(fq).map_err(|e| format!("{fq}: {e}"))? {
+        if !decls.iter().any(|d| d.name == n) {
+            log::warn!("{fq}: parameter {n} is not a parameter of {node} (`{node} --help` lists them); ignored");
+        }
+    }
+    overrides.extend(extra.iter().map(|(k, v)| (k.to_string(), v.clone())));
+    let params = Params::resolve(&decls, &overrides).map_err(|e| format!("{fq}: {e}"))?;
+    Ok((decls, params))
 }
 
 /// Builds a component by node name from its resolved parameters.
@@ -96,4 +110,31 @@ pub fn build(node: &str, params: &Params) -> Result<Box<dyn Component>, ParamErr
             return Err(ParamError::Invalid { name: "node".into(), reason: format!("no component named {other}") })
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The declared defaults, resolved and read back, are the struct's defaults.
+    fn defaults_round_trip<P: NodeParams + Default + PartialEq + std::fmt::Debug>() {
+        let p = Params::resolve(&P::declarations(), &Default::default()).unwrap();
+        assert_eq!(P::from_params(&p).unwrap(), P::default());
+    }
+
+    #[test]
+    fn every_node_reads_its_declared_defaults_back() {
+        defaults_round_trip::<camera_driver::CameraDriverParams>();
+        defaults_round_trip::<c_arm_pose::CArmPoseParams>();
+        defaults_round_trip::<edge_detector::EdgeParams>();
+        defaults_round_trip::<triangulator::TriangulatorParams>();
+        defaults_round_trip::<mesher::MesherParams>();
+        defaults_round_trip::<merger::MergerParams>();
+        defaults_round_trip::<xray_aligner::XrayAlignerParams>();
+        defaults_round_trip::<xsurf_runtime::dds::HostParams>();
+        for node in NODE_NAMES {
+            let p = Params::resolve(&declarations(node).unwrap(), &Default::default()).unwrap();
+            assert!(build(node, &p).is_ok(), "{node} does not start on its defaults");
+        }
+    }
 }

@@ -3,7 +3,6 @@
 //! A line waits (bounded) until `table -> carm` is known at its stamp, so tf arriving a little
 //! after the image is fine; a line that cannot be placed is counted and reported.
 
-use super::decl;
 use crate::convert;
 use crate::tf::TfBuffer;
 use std::collections::VecDeque;
@@ -17,58 +16,43 @@ use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::{LaserLine, ScanEvent};
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
 
-/// The parameters of `triangulator`.
-pub fn declarations() -> Vec<ParamDecl> {
-    vec![
-        decl(
-            "laser_plane",
-            V::DoubleArray(vec![0.0, 1.0, 0.0, 0.0]),
-            "m",
-            "the laser plane in carm, [nx, ny, nz, d]: {p : n.p = d}",
-        ),
-        decl(
-            "min_ray_plane_angle_deg",
-            V::Double(10.0),
-            "deg",
-            "camera rays meeting the plane at a smaller angle are rejected",
-        ),
-        decl("min_strength", V::Double(0.0), "grey levels", "line samples weaker than this are dropped"),
-        decl(
-            "min_z_m",
-            V::Double(-0.01),
-            "m",
-            "points lower than this above the tabletop are rejected (nothing below it can be seen)",
-        ),
-        decl(
-            "max_z_m",
-            V::Double(0.6),
-            "m",
-            "points higher than this above the tabletop are rejected (top of the measurement volume)",
-        ),
-        decl("table_frame", V::String("table".into()), "", "the fixed frame points are placed in"),
-        decl("carm_frame", V::String("carm".into()), "", "the C-arm frame the laser plane is given in"),
-        decl(
-            "max_pose_gap_s",
-            V::Double(0.5),
-            "s",
-            "largest gap between table -> carm samples that is interpolated across",
-        ),
-        decl(
-            "max_pending",
-            V::Integer(120),
-            "lines",
-            "lines held while waiting for their pose; beyond this the oldest is placed or dropped",
-        ),
-        decl(
-            "max_extrapolation_s",
-            V::Double(0.0),
-            "s",
-            "place a line up to this long after the newest table -> carm sample, extrapolating the travel linearly \
-             (0: wait for a sample after the image, exact interpolation)",
-        ),
-    ]
+xsurf_runtime::parameters! {
+    /// The parameters of `triangulator`.
+    pub struct TriangulatorParams {
+        /// the laser plane in carm, [nx, ny, nz, d]: {p : n.p = d}
+        laser_plane: Vec<f64> = vec![0.0, 1.0, 0.0, 0.0], unit "m";
+        /// camera rays meeting the plane at a smaller angle are rejected
+        min_ray_plane_angle_deg: f64 = 10.0, unit "deg";
+        /// line samples weaker than this are dropped
+        min_strength: f32 = 0.0, unit "grey levels";
+        /// points lower than this above the tabletop are rejected (nothing below it can be seen)
+        min_z_m: f64 = -0.01, unit "m";
+        /// points higher than this above the tabletop are rejected (top of the measurement volume)
+        max_z_m: f64 = 0.6, unit "m";
+        /// the fixed frame points are placed in
+        table_frame: String = "table".into();
+        /// the C-arm frame the laser plane is given in
+        carm_frame: String = "carm".into();
+        /// largest gap between table -> carm samples that is interpolated across
+        max_pose_gap_s: f64 = 0.5, unit "s";
+        /// lines held while waiting for their pose; beyond this the oldest is placed or dropped
+        max_pending: usize = 120, unit "lines", range 1..=100_000;
+        /// place a line up to this long after the newest table -> carm sample, extrapolating the
+        /// travel linearly (0: wait for a sample after the image, exact interpolation)
+        max_extrapolation_s: f64 = 0.0, unit "s", range 0.0..=0.1;
+    }
+}
+
+/// The plane `[nx, ny, nz, d]` of the parameter `name`: four values, a normal that is not zero.
+pub(crate) fn laser_plane(name: &str, v: &[f64]) -> Result<[f64; 4], ParamError> {
+    let plane: [f64; 4] =
+        v.try_into().map_err(|_| Params::invalid(name, format!("needs 4 values [nx, ny, nz, d], got {}", v.len())))?;
+    match xsurf_core::geom::Plane::from_params(plane) {
+        Some(_) => Ok(plane),
+        None => Err(Params::invalid(name, format!("{plane:?} has a zero or non-finite normal"))),
+    }
 }
 
 struct Config {
@@ -81,49 +65,32 @@ struct Config {
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
-    let plane = p.f64_array("laser_plane")?;
-    let plane: [f64; 4] = plane
-        .as_slice()
-        .try_into()
-        .map_err(|_| Params::invalid("laser_plane", format!("needs 4 values, got {}", plane.len())))?;
-    if xsurf_core::geom::Plane::from_params(plane).is_none() {
-        return Err(Params::invalid("laser_plane", format!("{plane:?} has a zero or non-finite normal")));
-    }
-    let angle = p.f64("min_ray_plane_angle_deg")?;
+    let p = TriangulatorParams::from_params(p)?;
+    let plane = laser_plane("laser_plane", &p.laser_plane)?;
+    let angle = p.min_ray_plane_angle_deg;
     if !(0.0..90.0).contains(&angle) {
         return Err(Params::invalid("min_ray_plane_angle_deg", format!("{angle:?} is not in [0, 90)")));
     }
-    let (lo, hi) = (p.f64("min_z_m")?, p.f64("max_z_m")?);
-    if !(lo < hi) {
-        return Err(Params::invalid("max_z_m", format!("{hi:?} must be above min_z_m {lo:?}")));
+    if !(p.min_z_m < p.max_z_m) {
+        return Err(Params::invalid("max_z_m", format!("{:?} must be above min_z_m {:?}", p.max_z_m, p.min_z_m)));
     }
-    let gap = p.f64("max_pose_gap_s")?;
+    let gap = p.max_pose_gap_s;
     if !(gap > 0.0 && gap < 3600.0) {
         return Err(Params::invalid("max_pose_gap_s", format!("{gap:?} is not in (0, 3600)")));
-    }
-    let pending = p.i64("max_pending")?;
-    if !(1..=100_000).contains(&pending) {
-        return Err(Params::invalid("max_pending", format!("{pending:?} is not in 1..=100000")));
     }
     Ok(Config {
         tri: TriangulatorConfig {
             laser_plane: plane,
             min_ray_plane_angle_deg: angle,
-            min_strength: p.f64("min_strength")? as f32,
-            min_z_m: p.f64("min_z_m")?,
-            max_z_m: p.f64("max_z_m")?,
+            min_strength: p.min_strength,
+            min_z_m: p.min_z_m,
+            max_z_m: p.max_z_m,
         },
-        table_frame: p.string("table_frame")?,
-        carm_frame: p.string("carm_frame")?,
+        table_frame: p.table_frame,
+        carm_frame: p.carm_frame,
         max_gap_ns: (gap * 1e9) as i64,
-        max_pending: pending as usize,
-        max_extrapolation_ns: {
-            let e = p.f64("max_extrapolation_s")?;
-            if !(0.0..=0.1).contains(&e) {
-                return Err(Params::invalid("max_extrapolation_s", format!("{e:?} is not in [0, 0.1]")));
-            }
-            (e * 1e9) as i64
-        },
+        max_pending: p.max_pending,
+        max_extrapolation_ns: (p.max_extrapolation_s * 1e9) as i64,
     })
 }
 
@@ -277,7 +244,7 @@ impl Component for TriangulatorNode {
         ]
     }
     fn declarations(&self) -> Vec<ParamDecl> {
-        declarations()
+        TriangulatorParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         self.cfg = config(p)?;
@@ -380,7 +347,7 @@ mod tests {
     /// others are not held up.
     #[test]
     fn a_bad_line_is_refused_under_its_own_topic_and_costs_only_itself() {
-        let params = Params::resolve(&declarations(), &BTreeMap::new()).unwrap();
+        let params = Params::resolve(&TriangulatorParams::declarations(), &BTreeMap::new()).unwrap();
         let mut r = Router::new();
         r.add(Box::new(TriangulatorNode::new(&params).unwrap()), "triangulator", "/cam1", &[]);
         r.publish("/cam1/laser_line", &line(1, 40, 39));

@@ -13,7 +13,6 @@
 //! `<output_dir>/scan_<id>/xray.png` (windowed, cropped) and `xray.json` (the placement: crop,
 //! exposure, geometry and the grid of table points with their texture coordinates).
 
-use super::decl;
 use crate::convert;
 use crate::tf::TfBuffer;
 use std::path::PathBuf;
@@ -30,83 +29,75 @@ use xsurf_msgs::visualization_msgs::{Marker, UVCoordinate};
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue as V, Params};
+use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
 
-/// The parameters of `xray_aligner`.
-pub fn declarations() -> Vec<ParamDecl> {
-    vec![
-        decl(
-            "image_source",
-            V::String("dicom".into()),
-            "",
-            "dicom: load dicom_file and publish it on /xray/image; topic: take the radiograph from /xray/image",
-        ),
-        decl(
-            "dicom_file",
-            V::String(String::new()),
-            "",
-            "DICOM radiograph to load; setting it while running loads it (the request)",
-        ),
-        decl("topic_monochrome1", V::Bool(true), "", "with image_source topic: values rise with dose (MONOCHROME1)"),
-        decl("laser_plane", V::DoubleArray(vec![0.0, 1.0, 0.0, 0.0]), "m", "fan-beam plane in carm [nx, ny, nz, d]"),
-        decl("laser_source", V::DoubleArray(vec![0.0, 0.0, 1.2]), "m", "X-ray focal spot in carm [x, y, z]"),
-        decl(
-            "source_detector_m",
-            V::Double(0.0),
-            "m",
-            "focal spot to detector line; 0: the DICOM's Distance Source to Detector",
-        ),
-        decl(
-            "detector_pitch_m",
-            V::Double(0.0),
-            "m",
-            "detector element pitch; 0: the DICOM's Imager Pixel Spacing (column spacing)",
-        ),
-        decl(
-            "center_column",
-            V::Double(-1.0),
-            "px",
-            "detector column under the focal spot (pixel edges at integers); -1: the middle",
-        ),
-        decl("flip_columns", V::Bool(false), "", "detector columns run towards -X of carm"),
-        decl("plane_height_m", V::Double(0.0), "m", "height above the tabletop of the plane the radiograph lies on"),
-        decl(
-            "crop_threshold",
-            V::Double(0.1),
-            "",
-            "edge columns with less than this fraction of the typical dose are cropped; 0: no crop",
-        ),
-        decl(
-            "window_center",
-            V::Double(0.0),
-            "",
-            "display window centre (rescaled units), used when window_width >= 1",
-        ),
-        decl(
-            "window_width",
-            V::Double(0.0),
-            "",
-            "display window width; 0: the file's window or VOI LUT, else automatic",
-        ),
-        decl(
-            "exposure_timing",
-            V::String("events".into()),
-            "",
-            "events: the scan's START..END; dicom: Acquisition DateTime + Exposure Time",
-        ),
-        decl("grid_columns", V::Integer(96), "", "overlay grid cells across (vertex colours stand in for the texture)"),
-        decl("grid_rows", V::Integer(128), "", "overlay grid cells along the scan (follows the travel)"),
-        decl("wait_for_pose_s", V::Double(2.0), "s", "after END, how long to wait for a pose past the exposure end"),
-        decl(
-            "output_dir",
-            V::String(String::new()),
-            "",
-            "if set, <output_dir>/scan_<id>/xray.png and xray.json are written",
-        ),
-        decl("frame_id", V::String("table".into()), "", "frame of the overlay"),
-        decl("table_frame", V::String("table".into()), "", "tf frame of the tabletop"),
-        decl("carm_frame", V::String("carm".into()), "", "tf frame of the C-arm"),
-    ]
+xsurf_runtime::choice! {
+    /// Where the radiograph comes from.
+    pub enum ImageSource {
+        /// `dicom_file`, published on `/xray/image`.
+        Dicom = "dicom",
+        /// `/xray/image`.
+        Topic = "topic",
+    }
+}
+
+xsurf_runtime::choice! {
+    /// What bounds the exposure in time.
+    pub enum ExposureTiming {
+        /// The scan's START..END.
+        Events = "events",
+        /// The DICOM's Acquisition DateTime and Exposure Time.
+        Dicom = "dicom",
+    }
+}
+
+xsurf_runtime::parameters! {
+    /// The parameters of `xray_aligner`.
+    pub struct XrayAlignerParams {
+        /// dicom: load dicom_file and publish it on /xray/image; topic: take the radiograph from
+        /// /xray/image
+        image_source: ImageSource = ImageSource::Dicom, via Choice;
+        /// DICOM radiograph to load; setting it while running loads it (the request)
+        dicom_file: String = String::new();
+        /// with image_source topic: values rise with dose (MONOCHROME1)
+        topic_monochrome1: bool = true;
+        /// fan-beam plane in carm [nx, ny, nz, d]
+        laser_plane: Vec<f64> = vec![0.0, 1.0, 0.0, 0.0], unit "m";
+        /// X-ray focal spot in carm [x, y, z]
+        laser_source: Vec<f64> = vec![0.0, 0.0, 1.2], unit "m";
+        /// focal spot to detector line; 0: the DICOM's Distance Source to Detector
+        source_detector_m: f64 = 0.0, unit "m", range 0.0..=1e6;
+        /// detector element pitch; 0: the DICOM's Imager Pixel Spacing (column spacing)
+        detector_pitch_m: f64 = 0.0, unit "m", range 0.0..=1e6;
+        /// detector column under the focal spot (pixel edges at integers); -1: the middle
+        center_column: f64 = -1.0, unit "px";
+        /// detector columns run towards -X of carm
+        flip_columns: bool = false;
+        /// height above the tabletop of the plane the radiograph lies on
+        plane_height_m: f64 = 0.0, unit "m";
+        /// edge columns with less than this fraction of the typical dose are cropped; 0: no crop
+        crop_threshold: f64 = 0.1;
+        /// display window centre (rescaled units), used when window_width >= 1
+        window_center: f64 = 0.0;
+        /// display window width; 0: the file's window or VOI LUT, else automatic
+        window_width: f64 = 0.0;
+        /// events: the scan's START..END; dicom: Acquisition DateTime + Exposure Time
+        exposure_timing: ExposureTiming = ExposureTiming::Events, via Choice;
+        /// overlay grid cells across (vertex colours stand in for the texture)
+        grid_columns: u32 = 96, range 1..=1024;
+        /// overlay grid cells along the scan (follows the travel)
+        grid_rows: u32 = 128, range 1..=1024;
+        /// after END, how long to wait for a pose past the exposure end
+        wait_for_pose_s: f64 = 2.0, unit "s", range 0.0..=3600.0;
+        /// if set, <output_dir>/scan_<id>/xray.png and xray.json are written
+        output_dir: Option<PathBuf> = None;
+        /// frame of the overlay
+        frame_id: String = "table".into();
+        /// tf frame of the tabletop
+        table_frame: String = "table".into();
+        /// tf frame of the C-arm
+        carm_frame: String = "carm".into();
+    }
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -133,72 +124,43 @@ struct Config {
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
-    let from_topic = match p.string("image_source")?.as_str() {
-        "dicom" => false,
-        "topic" => true,
-        other => return Err(Params::invalid("image_source", format!("{other}: expected dicom or topic"))),
-    };
-    let plane = p.f64_array("laser_plane")?;
-    let plane = <[f64; 4]>::try_from(plane.as_slice())
-        .ok()
-        .and_then(Plane::from_params)
+    let p = XrayAlignerParams::from_params(p)?;
+    let plane = super::triangulator::laser_plane("laser_plane", &p.laser_plane)?;
+    let plane = Plane::from_params(plane)
         .ok_or_else(|| Params::invalid("laser_plane", format!("{plane:?}: needs 4 finite values, non-zero normal")))?;
-    let src = p.f64_array("laser_source")?;
+    let src = &p.laser_source;
     let source = <[f64; 3]>::try_from(src.as_slice())
         .ok()
         .map(Vec3::from_array)
-        .filter(|v| v.is_finite())
         .ok_or_else(|| Params::invalid("laser_source", format!("{src:?}: needs 3 finite values")))?;
-    let non_negative = |name: &str| -> Result<f64, ParamError> {
-        let v = p.f64(name)?;
-        if !(v >= 0.0 && v.is_finite()) {
-            return Err(Params::invalid(name, format!("{v} must be >= 0")));
-        }
-        Ok(v)
-    };
-    let center = p.f64("center_column")?;
-    let crop = p.f64("crop_threshold")?;
+    let crop = p.crop_threshold;
     if !(0.0..1.0).contains(&crop) {
         return Err(Params::invalid("crop_threshold", format!("{crop:?} is not in [0, 1)")));
     }
-    let (wc, ww) = (p.f64("window_center")?, p.f64("window_width")?);
+    let (wc, ww) = (p.window_center, p.window_width);
     if !(ww >= 0.0) {
         return Err(Params::invalid("window_width", format!("{ww:?} must be >= 0")));
     }
-    let dicom_timing = match p.string("exposure_timing")?.as_str() {
-        "events" => false,
-        "dicom" => true,
-        other => return Err(Params::invalid("exposure_timing", format!("{other}: expected events or dicom"))),
-    };
-    let cells = |name: &str| -> Result<u32, ParamError> {
-        let v = p.i64(name)?;
-        u32::try_from(v)
-            .ok()
-            .filter(|v| (1..=1024).contains(v))
-            .ok_or_else(|| Params::invalid(name, format!("{v} is not in 1..=1024")))
-    };
-    let wait = non_negative("wait_for_pose_s")?;
-    let dir = p.string("output_dir")?;
     Ok(Config {
-        from_topic,
-        dicom_file: p.string("dicom_file")?,
-        topic_monochrome1: p.bool("topic_monochrome1")?,
+        from_topic: p.image_source == ImageSource::Topic,
+        dicom_file: p.dicom_file,
+        topic_monochrome1: p.topic_monochrome1,
         plane,
         source,
-        source_detector_m: non_negative("source_detector_m")?,
-        pitch_m: non_negative("detector_pitch_m")?,
-        center_column: (center >= 0.0).then_some(center),
-        flip_columns: p.bool("flip_columns")?,
-        plane_height_m: p.f64("plane_height_m")?,
+        source_detector_m: p.source_detector_m,
+        pitch_m: p.detector_pitch_m,
+        center_column: (p.center_column >= 0.0).then_some(p.center_column),
+        flip_columns: p.flip_columns,
+        plane_height_m: p.plane_height_m,
         crop_threshold: crop,
         window: (ww >= 1.0).then_some(Window { center: wc, width: ww }),
-        dicom_timing,
-        grid: (cells("grid_columns")?, cells("grid_rows")?),
-        wait_ns: (wait * 1e9) as i64,
-        output_dir: (!dir.is_empty()).then(|| PathBuf::from(dir)),
-        frame_id: p.string("frame_id")?,
-        table_frame: p.string("table_frame")?,
-        carm_frame: p.string("carm_frame")?,
+        dicom_timing: p.exposure_timing == ExposureTiming::Dicom,
+        grid: (p.grid_columns, p.grid_rows),
+        wait_ns: (p.wait_for_pose_s * 1e9) as i64,
+        output_dir: p.output_dir,
+        frame_id: p.frame_id,
+        table_frame: p.table_frame,
+        carm_frame: p.carm_frame,
     })
 }
 
@@ -509,7 +471,7 @@ impl Component for XrayAlignerNode {
         v
     }
     fn declarations(&self) -> Vec<ParamDecl> {
-        declarations()
+        XrayAlignerParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         let c = config(p)?;
@@ -609,6 +571,7 @@ mod tests {
     use std::rc::Rc;
     use xsurf_core::pose::table_from_carm;
     use xsurf_core::xray::Radiograph;
+    use xsurf_runtime::params::ParamValue as V;
     use xsurf_runtime::router::Router;
 
     fn params(node: &str, set: &[(&str, V)]) -> Params {
