@@ -10,7 +10,7 @@ use common::{assert_clean_failure, checker, scratch, xsurf};
 use std::process::Command;
 use xsurf_core::geom::Plane;
 use xsurf_core::rig::Rig;
-use xsurf_nodes::components::{build, declarations};
+use xsurf_nodes::registry::{build, declarations};
 use xsurf_runtime::component::Msg;
 use xsurf_runtime::params::{ParamValue as V, Params};
 use xsurf_runtime::router::Router;

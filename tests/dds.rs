@@ -165,7 +165,7 @@ fn node_executables_refuse_bad_input_with_exit_2() {
         let out = run(bin.to_str().unwrap(), &["--help"], &[]);
         assert!(out.status.success(), "{node} --help");
         let text = String::from_utf8_lossy(&out.stdout);
-        for d in xsurf_nodes::components::declarations(node).unwrap() {
+        for d in xsurf_nodes::registry::declarations(node).unwrap() {
             let line = text.lines().find(|l| l.starts_with(&format!("  {} (", d.name)));
             let line = line.unwrap_or_else(|| panic!("{node} --help lacks {}:\n{text}", d.name));
             // Type, default and unit, as `ros2 param describe` gives them.

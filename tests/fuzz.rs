@@ -158,20 +158,20 @@ impl Nodes {
         let mut nodes = Vec::new();
         for name in ["camera_driver", "c_arm_pose", "edge_detector", "triangulator", "mesher", "merger", "xray_aligner"]
         {
-            let decls = xsurf_nodes::components::declarations(name).unwrap();
+            let decls = xsurf_nodes::registry::declarations(name).unwrap();
             let params = Params::resolve(&decls, &BTreeMap::new()).unwrap();
-            let mut n = xsurf_nodes::components::build(name, &params).unwrap();
+            let mut n = xsurf_nodes::registry::build(name, &params).unwrap();
             n.set_identity(name, "/cam1");
             nodes.push(n);
         }
         // A second edge detector, for image_transport's compressed images.
-        let decls = xsurf_nodes::components::declarations("edge_detector").unwrap();
+        let decls = xsurf_nodes::registry::declarations("edge_detector").unwrap();
         let compressed = BTreeMap::from([(
             "image_transport".to_string(),
             xsurf_runtime::params::ParamValue::String("compressed".into()),
         )]);
         let params = Params::resolve(&decls, &compressed).unwrap();
-        nodes.push(xsurf_nodes::components::build("edge_detector", &params).unwrap());
+        nodes.push(xsurf_nodes::registry::build("edge_detector", &params).unwrap());
         Nodes { nodes, out: Outbox::default() }
     }
 
@@ -314,9 +314,9 @@ fn targets() -> Vec<Target> {
                     let fq = format!("/cam1/{node}");
                     match xsurf_runtime::rosargs::params_from_yaml(&text, &fq) {
                         Ok(map) => {
-                            let decls = xsurf_nodes::components::declarations(node).unwrap();
+                            let decls = xsurf_nodes::registry::declarations(node).unwrap();
                             if let Ok(p) = Params::resolve(&decls, &map) {
-                                let _ = xsurf_nodes::components::build(node, &p).map(|_| ());
+                                let _ = xsurf_nodes::registry::build(node, &p).map(|_| ());
                             }
                         }
                         Err(e) => last = Outcome::Refused(e),

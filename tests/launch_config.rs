@@ -3,7 +3,7 @@
 
 mod common;
 use common::*;
-use xsurf_nodes::components;
+use xsurf_nodes::registry as components;
 use xsurf_runtime::params::{ParamValue, Params};
 use xsurf_runtime::rosargs::RosArgs;
 

@@ -5,7 +5,7 @@
 //! Exit codes: 0 after a clean shutdown (SIGINT/SIGTERM), 1 when DDS fails, 2 for a malformed
 //! command line, params file, parameter value or environment variable.
 
-use crate::components;
+use crate::registry as components;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Duration;
@@ -39,8 +39,7 @@ pub fn node_config(
         params,
         validate: Arc::new(move |p: &Params| components::build(node, p).map(|_| ()).map_err(|e| e.to_string())),
         rosout: ros.rosout_logs.unwrap_or(true),
-        // Sources keep time on their own clocks; the processing nodes only need slow ticks.
-        tick_period: Duration::from_millis(if matches!(node, "camera_driver" | "c_arm_pose") { 2 } else { 50 }),
+        tick_period: Duration::from_millis(components::node_type(node).map_or(50, |t| t.tick_period_ms)),
     };
     Ok((cfg, component))
 }
@@ -102,8 +101,8 @@ pub fn node_help(node: &str) -> String {
         "{node} {} (xsurf; documented in nodes/README.md)\n\nusage: {node} [--ros-args [-r __ns:=/NS] [-r __node:=NAME] [-r FROM:=TO] [-p NAME:=VALUE] [--params-file FILE] [--log-level LEVEL]]\n",
         env!("CARGO_PKG_VERSION")
     );
-    let decls = crate::components::declarations(node).unwrap_or_default();
-    if let Ok(c) = Params::resolve(&decls, &Default::default()).and_then(|p| crate::components::build(node, &p)) {
+    let decls = components::declarations(node).unwrap_or_default();
+    if let Ok(c) = Params::resolve(&decls, &Default::default()).and_then(|p| components::build(node, &p)) {
         let ports = |title: &str, ports: Vec<xsurf_runtime::component::Port>, s: &mut String| {
             let _ = writeln!(s, "\n{title}:");
             for p in ports {

@@ -1,13 +1,14 @@
 //! # xsurf-nodes
 //!
-//! The nodes of the spec as transport-agnostic components ([`components`]), the conversions
+//! The nodes of the spec as transport-agnostic components, one folder each
+//! ([`camera_driver`], [`c_arm_pose`], [`edge_detector`], [`triangulator`], [`mesher`],
+//! [`merger`], [`xray_aligner`]) listed in the [`registry`], the conversions
 //! between messages and the algorithms ([`convert`]), the scanner's tf view ([`tf`]), the
 //! synthetic scan writer ([`synth`]), the calibration commands ([`calibrate`]), offline reconstruction from a bag ([`offline`]) and the
 //! launcher of ROS 2 YAML launch files ([`launch`]).
 #![deny(missing_docs)]
 
 pub mod calibrate;
-pub mod components;
 pub mod convert;
 pub mod host;
 pub mod launch;
@@ -15,9 +16,22 @@ pub mod offline;
 pub mod param_client;
 pub mod play;
 pub mod record;
+pub mod registry;
+mod republish;
 pub mod synth;
+mod tally;
 pub mod tf;
 pub mod v4l2;
+
+/// The node types, in pipeline order: each is a folder `nodes/src/<node>/` whose `NODE` says
+/// what the [`registry`] lists. Adding a node is one folder and its name here.
+macro_rules! node_types {
+    ($($node:ident),+ $(,)?) => {
+        $(pub mod $node;)+
+        const NODE_TYPES: [registry::NodeType; [$(stringify!($node)),+].len()] = [$($node::NODE),+];
+    };
+}
+node_types!(camera_driver, c_arm_pose, edge_detector, triangulator, mesher, merger, xray_aligner);
 
 /// A command-line mistake in an `xsurf` command (the binary prints its usage and exits 2).
 #[derive(Debug, thiserror::Error)]

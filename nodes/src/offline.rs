@@ -6,7 +6,7 @@
 //! in the ROS 2 format). The meshers and the merger write the files; a bag with one scan has
 //! them in `DIR`, several scans in `DIR/scan_<id>/`.
 
-use crate::components;
+use crate::registry as components;
 use anyhow::{bail, Context};
 use serde::Serialize;
 use std::collections::BTreeMap;

@@ -3,7 +3,7 @@
 //! parameter, `XSURF_BLESS=1 cargo test -p xsurf-nodes --test docs` rewrites them.
 #![allow(clippy::unwrap_used)]
 
-use xsurf_nodes::components::{declarations, NODE_NAMES};
+use xsurf_nodes::registry::{declarations, NODE_NAMES};
 use xsurf_runtime::params::markdown_table;
 
 /// The README's sections and their tables: each node's, then the host's.

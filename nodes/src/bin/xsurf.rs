@@ -663,7 +663,7 @@ fn main() -> ExitCode {
     if args.first().is_some_and(|a| a == "compose") && args.iter().skip(1).any(|a| a == "--help" || a == "-h") {
         println!(
             "usage: xsurf compose /NS/NODE_TYPE... | /NS/NAME=NODE_TYPE... [--ros-args ...]\n  run several nodes in one process, connected in memory, every topic still on DDS\n  node types: {}\n  example: xsurf compose /cam1/edge_detector /cam1/triangulator --ros-args --params-file params.yaml\n  each node's topics and parameters: <node_type> --help (for example edge_detector --help)",
-            xsurf_nodes::components::NODE_NAMES.join(", ")
+            xsurf_nodes::registry::NODE_NAMES.join(", ")
         );
         return ExitCode::SUCCESS;
     }

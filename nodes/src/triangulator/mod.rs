@@ -3,6 +3,17 @@
 //! A line waits (bounded) until `table -> carm` is known at its stamp, so tf arriving a little
 //! after the image is fine; a line that cannot be placed is counted and reported.
 
+mod params;
+pub use params::*;
+
+/// The node type, as the registry lists it.
+pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
+    name: "triangulator",
+    declarations: <TriangulatorParams as xsurf_runtime::params::NodeParams>::declarations,
+    build: |p| Ok(Box::new(TriangulatorNode::new(p)?)),
+    tick_period_ms: 50,
+};
+
 use crate::convert;
 use crate::tf::TfBuffer;
 use std::collections::VecDeque;
@@ -17,33 +28,6 @@ use xsurf_msgs::xsurf_msgs::{LaserLine, ScanEvent};
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
-
-xsurf_runtime::parameters! {
-    /// The parameters of `triangulator`.
-    pub struct TriangulatorParams {
-        /// the laser plane in carm, [nx, ny, nz, d]: {p : n.p = d}
-        laser_plane: Vec<f64> = vec![0.0, 1.0, 0.0, 0.0], unit "m";
-        /// camera rays meeting the plane at a smaller angle are rejected
-        min_ray_plane_angle_deg: f64 = 10.0, unit "deg";
-        /// line samples weaker than this are dropped
-        min_strength: f32 = 0.0, unit "grey levels";
-        /// points lower than this above the tabletop are rejected (nothing below it can be seen)
-        min_z_m: f64 = -0.01, unit "m";
-        /// points higher than this above the tabletop are rejected (top of the measurement volume)
-        max_z_m: f64 = 0.6, unit "m";
-        /// the fixed frame points are placed in
-        table_frame: String = "table".into();
-        /// the C-arm frame the laser plane is given in
-        carm_frame: String = "carm".into();
-        /// largest gap between table -> carm samples that is interpolated across
-        max_pose_gap_s: f64 = 0.5, unit "s";
-        /// lines held while waiting for their pose; beyond this the oldest is placed or dropped
-        max_pending: usize = 120, unit "lines", range 1..=100_000;
-        /// place a line up to this long after the newest table -> carm sample, extrapolating the
-        /// travel linearly (0: wait for a sample after the image, exact interpolation)
-        max_extrapolation_s: f64 = 0.0, unit "s", range 0.0..=0.1;
-    }
-}
 
 /// The plane `[nx, ny, nz, d]` of the parameter `name`: four values, a normal that is not zero.
 pub(crate) fn laser_plane(name: &str, v: &[f64]) -> Result<[f64; 4], ParamError> {
@@ -111,7 +95,7 @@ pub struct TriangulatorNode {
     /// The camera (the node's namespace), for the scan reports.
     camera: String,
     /// The lines of the current scan placed and refused, for its report.
-    tally: super::tally::ScanTally,
+    tally: crate::tally::ScanTally,
 }
 
 /// How long C-arm poses are kept, as tf2's buffer keeps 10 s: a line older than the newest pose

@@ -7,6 +7,17 @@
 //! Gaps in the frame stamps are counted as dropped frames, logged, and kept as
 //! empty grid columns so the mesh does not bridge them (a single missing frame is filled).
 
+mod params;
+pub use params::*;
+
+/// The node type, as the registry lists it.
+pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
+    name: "mesher",
+    declarations: <MesherParams as xsurf_runtime::params::NodeParams>::declarations,
+    build: |p| Ok(Box::new(MesherNode::new(p)?)),
+    tick_period_ms: 50,
+};
+
 use crate::convert;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -20,50 +31,6 @@ use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
-
-/// The mesh's defaults (core's), which the declarations show.
-const D: MeshConfig = MeshConfig::DEFAULT;
-
-xsurf_runtime::parameters! {
-    /// The parameters of `mesher`.
-    pub struct MesherParams {
-        /// longest triangle edge
-        max_edge_m: f32 = D.max_edge_m, unit "m";
-        /// extra edge length per metre of camera range (PCL's depth term)
-        max_edge_per_m: f32 = D.max_edge_per_m, unit "m/m";
-        /// smallest triangle angle (the study used 12)
-        min_angle_deg: f32 = D.min_angle_deg, unit "deg";
-        /// fill isolated single missing points by interpolation
-        fill_single_holes: bool = D.fill_single_holes;
-        /// a point that its grid neighbours (along its frame or across frames) miss by more than
-        /// this is rejected before meshing and counted: a wrong peak, a highlight, an occlusion
-        /// edge's mixed pixel (0: keep every point)
-        outlier_tolerance_m: f32 = D.outlier_tolerance_m, unit "m";
-        /// Laplacian smoothing passes (boundary kept)
-        smooth_iterations: u32 = D.smooth_iterations;
-        /// Laplacian step, (0, 1]
-        smooth_lambda: f32 = D.smooth_lambda;
-        /// how often the growing cloud is published during a scan (0: only at END)
-        cloud_rate_hz: f64 = 2.0, unit "Hz", range 0.0..=1000.0;
-        /// after END the mesh marker is published again this often until the next scan, so
-        /// viewers that join late or lose it (best effort) get it (0: once)
-        mesh_republish_s: f64 = 2.0, unit "s", range 0.0..=3600.0;
-        /// if set, each scan's mesh is written to <output_dir>/scan_<id>/<camera>.ply
-        output_dir: Option<PathBuf> = None;
-        /// camera name for files and markers (default: the node's namespace)
-        camera: String = String::new();
-        /// frame of the clouds and meshes
-        frame_id: String = "table".into();
-        /// a stamp gap above this many nominal frame periods counts as dropped frames
-        gap_factor: f64 = 1.5;
-        /// after END or ABORT, profiles stamped before it (exposed in the scan, still on their
-        /// way) are taken for this long before the scan is closed (0: close at END)
-        end_grace_s: f64 = 0.3, unit "s", range 0.0..=10.0;
-        /// as the edge detector's: vertical (a sample per image row) or horizontal (per column);
-        /// with camera_info it gives the samples per frame, and a profile of another size is refused
-        line_orientation: Orientation = Orientation::Vertical, via Choice;
-    }
-}
 
 struct Config {
     mesh: MeshConfig,
@@ -218,7 +185,7 @@ pub struct MesherNode {
     gaps: GapDetector,
     last_cloud_ns: i64,
     /// The last scan's mesh marker, published again between scans.
-    last_mesh: super::Republisher,
+    last_mesh: crate::republish::Republisher,
     scans: u64,
     frames: u64,
     dropped_frames: u64,
@@ -264,7 +231,7 @@ impl MesherNode {
             grid: Grid::default(),
             gaps: GapDetector::default(),
             last_cloud_ns: i64::MIN,
-            last_mesh: super::Republisher::default(),
+            last_mesh: crate::republish::Republisher::default(),
             scans: 0,
             frames: 0,
             dropped_frames: 0,

@@ -7,9 +7,19 @@
 //! rig. `rotate_180` turns every image (the study's cameras hung upside down); the calibration
 //! must then describe the turned images.
 
-use super::edge_detector::Transport;
+mod params;
+pub use params::*;
+
+/// The node type, as the registry lists it.
+pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
+    name: "camera_driver",
+    declarations: <CameraDriverParams as xsurf_runtime::params::NodeParams>::declarations,
+    build: |p| Ok(Box::new(CameraDriverNode::new(p)?)),
+    tick_period_ms: 2,
+};
+
+use crate::edge_detector::Transport;
 use crate::convert;
-use std::path::PathBuf;
 use std::sync::Arc;
 use xsurf_core::geom::Iso3;
 use xsurf_core::image::Encoding;
@@ -22,71 +32,6 @@ use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
-
-xsurf_runtime::choice! {
-    /// Which source the images come from (the `source` parameter).
-    pub enum SourceKind {
-        /// The synthetic scanner.
-        Synthetic = "synthetic",
-        /// An image sequence.
-        Files = "files",
-        /// A Video4Linux2 camera.
-        V4l2 = "v4l2",
-    }
-}
-
-xsurf_runtime::parameters! {
-    /// The parameters of `camera_driver`.
-    pub struct CameraDriverParams {
-        /// image source: synthetic, files, or v4l2 (a USB/UVC camera; needs the cargo feature v4l2)
-        source: SourceKind = SourceKind::Synthetic, via Choice;
-        /// v4l2 source: the video device
-        device: String = "/dev/video0".into();
-        /// v4l2 source: the camera's delay from exposure to delivery, subtracted from the time a
-        /// frame is dequeued
-        /// (in [0, 1]; checked only for the v4l2 source)
-        stamp_offset_s: f64 = 0.0, unit "s";
-        /// files source: a directory (its .bmp/.png/.pgm/.ppm/.jpg in name order) or a pattern
-        /// such as /data/frame_%03d.bmp
-        files: String = String::new();
-        /// files source: one stamp per frame (seconds, or integer ns), else stamps from fps
-        timestamps_file: Option<PathBuf> = None;
-        /// files source: start again after the last frame
-        loop_files: bool = false;
-        /// camera_calibration YAML (file:///path or a path), as `xsurf calibrate intrinsics`
-        /// writes it; empty: the rig's intrinsics
-        camera_info_url: String = String::new();
-        /// turn every image by 180 degrees before publishing
-        rotate_180: bool = false;
-        /// synthetic source: pyramid, phantom, sphere, cylinder, box or body
-        scene: String = "pyramid".into();
-        /// camera name in the rig (default: the node's namespace)
-        camera: String = String::new();
-        /// rig YAML (see launch-config/rig_study.yaml); empty: the study's rig
-        rig_file: Option<PathBuf> = None;
-        /// image width (the study rig's intrinsics are scaled to it)
-        width: i64 = 640, unit "px";
-        /// image height
-        height: i64 = 480, unit "px";
-        /// frame rate
-        fps: f64 = 30.0, unit "Hz";
-        /// mono8, rgb8 or bgr8
-        encoding: String = "mono8".into();
-        /// raw: publish image_raw (sensor_msgs/Image); compressed: publish image_raw/compressed
-        /// (sensor_msgs/CompressedImage) instead, as image_transport's compressed plugin writes it
-        image_transport: Transport = Transport::Raw, via Choice;
-        /// compressed transport: jpeg or png
-        compressed_format: String = "jpeg".into();
-        /// compressed transport: JPEG quality, 1..=100 (image_transport's default 95)
-        jpeg_quality: i64 = 95, range 1..=100;
-        /// synthetic sensor noise seed
-        seed: i64 = 1;
-        /// fixed frame of /tf
-        table_frame: String = "table".into();
-        /// C-arm frame of /tf
-        carm_frame: String = "carm".into();
-    }
-}
 
 /// Where the images come from.
 enum Source {
@@ -332,7 +277,7 @@ pub struct CameraDriverNode {
     poses: [Option<(i64, Iso3)>; 2],
     laser_on: bool,
     /// The frames of the current scan, for its report.
-    tally: super::tally::ScanTally,
+    tally: crate::tally::ScanTally,
     next_ns: Option<i64>,
     frames: u64,
     skipped: u64,
@@ -691,7 +636,7 @@ impl Component for CameraDriverNode {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::components::{build, declarations};
+    use crate::registry::{build, declarations};
     use std::cell::RefCell;
     use std::rc::Rc;
     use xsurf_runtime::params::ParamValue as V;

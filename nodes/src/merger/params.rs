@@ -1,0 +1,56 @@
+//! The parameters of `merger`, declared once (see `xsurf_runtime::parameters!`).
+
+use std::path::PathBuf;
+use xsurf_core::fuse::FuseConfig;
+use xsurf_core::mesh::MeshConfig;
+use xsurf_core::register::RefineConfig;
+
+xsurf_runtime::parameters! {
+    /// The parameters of `merger`.
+    pub struct MergerParams {
+        /// camera namespaces whose /<cam>/cloud are merged
+        cameras: Vec<String> = vec!["cam1".into(), "cam2".into()];
+        /// wait after END before merging, so the final clouds arrive first
+        merge_delay_s: f64 = 1.0, unit "s", range 0.0..=600.0;
+        /// longest triangle edge when meshing each camera's grid
+        max_edge_m: f32 = MeshConfig::DEFAULT.max_edge_m, unit "m";
+        /// smallest triangle angle
+        min_angle_deg: f32 = MeshConfig::DEFAULT.min_angle_deg, unit "deg";
+        /// where cameras overlap, samples of different cameras closer than this are one
+        /// observation: the region's better-lit camera keeps it, averaged with the other's (0:
+        /// keep both layers)
+        fuse_distance_m: f32 = FuseConfig::DEFAULT.min_distance_m, unit "m", range 0.0..=0.05;
+        /// stitch the seams between the cameras' surfaces in the merged mesh (triangles within
+        /// max_edge_m and min_angle_deg)
+        zipper: bool = true;
+        /// after zippering, each hole in the merged surface bounded by at most this many edges
+        /// is closed with triangles whose new edges are within max_edge_m; wider holes and the
+        /// outer rim stay open (0: none)
+        max_hole_edges: usize = 64, range 0..=100_000;
+        /// refine each further camera's placement against the first camera's surface (false:
+        /// calibration only)
+        refine: bool = true;
+        /// the laser plane in carm, [nx, ny, nz, d], as the triangulators have it (the
+        /// refinement re-triangulates)
+        laser_plane: Vec<f64> = vec![0.0, 1.0, 0.0, 0.0], unit "m";
+        /// a refinement that moves a camera further than this is refused
+        refine_max_translation_m: f64 = RefineConfig::DEFAULT.max_translation_m, unit "m";
+        /// a refinement that turns a camera further than this is refused
+        refine_max_rotation_deg: f64 = RefineConfig::DEFAULT.max_rotation_deg, unit "deg";
+        /// a refinement whose RMS point-to-plane residual stays above this is refused
+        refine_max_rms_m: f64 = RefineConfig::DEFAULT.max_rms_m, unit "m";
+        /// if set, each refined placement is written into this rig file (atomically), for the
+        /// next scans
+        save_rig_file: Option<PathBuf> = None;
+        /// surface transparency in the VRML and glTF scenes, 0..1
+        transparency: f32 = 0.3, range 0.0..=1.0;
+        /// if set, each scan's merged.ply, scene.wrl and scene.glb go to <output_dir>/scan_<id>/
+        output_dir: Option<PathBuf> = None;
+        /// frame of the merged cloud and mesh
+        frame_id: String = "table".into();
+        /// the merged cloud and mesh are published again this often until the next scan, for
+        /// viewers that join late or lose them (best effort) (0: once)
+        republish_s: f64 = 2.0, unit "s", range 0.0..=3600.0;
+    }
+}
+

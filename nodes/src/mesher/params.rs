@@ -1,0 +1,50 @@
+//! The parameters of `mesher`, declared once (see `xsurf_runtime::parameters!`).
+
+use std::path::PathBuf;
+use xsurf_core::edge::Orientation;
+use xsurf_core::mesh::MeshConfig;
+
+/// The mesh's defaults (core's), which the declarations show.
+const D: MeshConfig = MeshConfig::DEFAULT;
+
+xsurf_runtime::parameters! {
+    /// The parameters of `mesher`.
+    pub struct MesherParams {
+        /// longest triangle edge
+        max_edge_m: f32 = D.max_edge_m, unit "m";
+        /// extra edge length per metre of camera range (PCL's depth term)
+        max_edge_per_m: f32 = D.max_edge_per_m, unit "m/m";
+        /// smallest triangle angle (the study used 12)
+        min_angle_deg: f32 = D.min_angle_deg, unit "deg";
+        /// fill isolated single missing points by interpolation
+        fill_single_holes: bool = D.fill_single_holes;
+        /// a point that its grid neighbours (along its frame or across frames) miss by more than
+        /// this is rejected before meshing and counted: a wrong peak, a highlight, an occlusion
+        /// edge's mixed pixel (0: keep every point)
+        outlier_tolerance_m: f32 = D.outlier_tolerance_m, unit "m";
+        /// Laplacian smoothing passes (boundary kept)
+        smooth_iterations: u32 = D.smooth_iterations;
+        /// Laplacian step, (0, 1]
+        smooth_lambda: f32 = D.smooth_lambda;
+        /// how often the growing cloud is published during a scan (0: only at END)
+        cloud_rate_hz: f64 = 2.0, unit "Hz", range 0.0..=1000.0;
+        /// after END the mesh marker is published again this often until the next scan, so
+        /// viewers that join late or lose it (best effort) get it (0: once)
+        mesh_republish_s: f64 = 2.0, unit "s", range 0.0..=3600.0;
+        /// if set, each scan's mesh is written to <output_dir>/scan_<id>/<camera>.ply
+        output_dir: Option<PathBuf> = None;
+        /// camera name for files and markers (default: the node's namespace)
+        camera: String = String::new();
+        /// frame of the clouds and meshes
+        frame_id: String = "table".into();
+        /// a stamp gap above this many nominal frame periods counts as dropped frames
+        gap_factor: f64 = 1.5;
+        /// after END or ABORT, profiles stamped before it (exposed in the scan, still on their
+        /// way) are taken for this long before the scan is closed (0: close at END)
+        end_grace_s: f64 = 0.3, unit "s", range 0.0..=10.0;
+        /// as the edge detector's: vertical (a sample per image row) or horizontal (per column);
+        /// with camera_info it gives the samples per frame, and a profile of another size is refused
+        line_orientation: Orientation = Orientation::Vertical, via Choice;
+    }
+}
+
