@@ -10,6 +10,7 @@
 //! - [`synth`]: the synthetic scanner, which renders scans and knows the true surface;
 //! - [`xray`]: the radiograph's grey levels, cropping and placement in `table`;
 //! - [`register`]: the second camera's placement refined against the first camera's surface;
+//! - [`merge`]: one surface of a scan from the cameras' grids (refine, fuse, mesh, stitch);
 //! - [`eval`]: accuracy and coverage against that truth.
 //!
 //! ```
@@ -40,6 +41,7 @@ pub mod geom;
 pub mod holes;
 pub mod image;
 pub mod limits;
+pub mod merge;
 pub mod mesh;
 pub mod pose;
 pub mod register;

@@ -24,6 +24,7 @@ use xsurf_core::calib::placement::{self, table_from_board, PlacementView};
 use xsurf_core::camera::CameraModel;
 use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine};
 use xsurf_core::geom::Vec3;
+use xsurf_core::merge::refine::{RefinementFile, Status};
 use xsurf_core::pose::table_from_carm;
 use xsurf_core::rig::{Rig, RigCamera};
 use xsurf_core::synth::calib::{board_views, render_board, BoardLook, Exposure, RayTable};
@@ -632,41 +633,34 @@ fn cmd_scan(args: &[String]) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(&refinement).map_err(|e| {
         anyhow!("{}: {e}: the merger refined nothing (one camera only, or no refinement ran)", refinement.display())
     })?;
-    let outcome: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("{}", refinement.display()))?;
-    let cameras = outcome["cameras"].as_array().cloned().unwrap_or_default();
+    let outcome: RefinementFile = serde_json::from_str(&text).with_context(|| format!("{}", refinement.display()))?;
+    let cameras = outcome.cameras;
     let mut refused = Vec::new();
     for c in &cameras {
-        let name = c["camera"].as_str().unwrap_or("?");
-        if c["status"] != "refined" {
-            refused.push(format!("{name}: {}", c["reason"].as_str().unwrap_or("refused")));
+        let name = c.camera.as_str();
+        let (Status::Refined, Some(refined)) = (c.status, c.refined) else {
+            refused.push(format!("{name}: {}", c.reason));
             continue;
-        }
-        let t = &c["refined"]["translation"];
-        let q = &c["refined"]["rotation"];
-        let num = |v: &serde_json::Value| v.as_f64().ok_or_else(|| anyhow!("{}: bad number {v}", refinement.display()));
-        let e = xsurf_core::geom::Iso3::from_parts(
-            Vec3::new(num(&t[0])?, num(&t[1])?, num(&t[2])?),
-            xsurf_core::geom::Quat { x: num(&q[0])?, y: num(&q[1])?, z: num(&q[2])?, w: num(&q[3])? },
-        );
+        };
         let cam = rig
             .cameras
             .iter_mut()
             .find(|rc| rc.name == name)
             .ok_or_else(|| anyhow!("rig file {}: no camera {name:?} (the bag has it)", rig_path.display()))?;
-        cam.set_carm_from_optical(&e);
-        let d = &c["correction_m"];
+        cam.set_carm_from_optical(&refined.iso());
+        let [dx, dy, dz] = c.correction_m.unwrap_or_default();
+        let num = |v: Option<f64>| v.unwrap_or(f64::NAN);
         println!(
             "{name}: refined against {}: moved {:.2} mm / {:.3} deg; residual RMS {:.3} -> {:.3} mm over {} points, \
              overlap {:.0} %, {} iterations",
-            c["reference"].as_str().unwrap_or("?"),
-            (num(&d[0])?.powi(2) + num(&d[1])?.powi(2) + num(&d[2])?.powi(2)).sqrt() * 1e3,
-            num(&c["correction_deg"])?,
-            num(&c["rms_before_m"])? * 1e3,
-            num(&c["rms_after_m"])? * 1e3,
-            c["points"],
-            num(&c["overlap_fraction"])? * 100.0,
-            c["iterations"]
+            c.reference,
+            (dx.powi(2) + dy.powi(2) + dz.powi(2)).sqrt() * 1e3,
+            num(c.correction_deg),
+            num(c.rms_before_m) * 1e3,
+            num(c.rms_after_m) * 1e3,
+            c.points.unwrap_or(0),
+            num(c.overlap_fraction) * 100.0,
+            c.iterations.unwrap_or(0)
         );
     }
     write_json(
@@ -681,7 +675,7 @@ fn cmd_scan(args: &[String]) -> anyhow::Result<()> {
             if refused.is_empty() { "no camera was refined".to_string() } else { refused.join("; ") }
         );
     }
-    let names: Vec<&str> = cameras.iter().filter_map(|c| c["camera"].as_str()).collect();
+    let names: Vec<&str> = cameras.iter().map(|c| c.camera.as_str()).collect();
     xsurf_formats::rig::write(
         &out,
         &rig,

@@ -104,19 +104,29 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     })
 }
 
+/// Where the node is in its scans.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Scan {
+    /// No scan yet.
+    Idle,
+    /// Speed mode: a scan starts at this stamp (an automatic start, or a START request).
+    Scheduled(i64),
+    /// A scan runs since this stamp (speed mode measures the travel from it).
+    Running(i64),
+    /// The last scan ended; speed mode: the C-arm stands where an END or ABORT request stopped
+    /// it, or (None) at `travel_end_m`.
+    Ended(Option<f64>),
+}
+
 /// The C-arm pose component.
 pub struct CArmPoseNode {
     cfg: Config,
-    start_ns: Option<i64>,
-    scanning: bool,
-    done: bool,
+    scan: Scan,
     last_pub: i64,
     statics_sent: bool,
     scans: u64,
     aborts: u64,
     scan_id: u32,
-    /// Speed mode: where the travel stopped (an END request before travel_end_m).
-    stopped_at: Option<f64>,
     /// Encoder mode: the newest sample (stamp, travel, angle) and the last movement.
     encoder: Option<(i64, f64, f64)>,
     rest: Option<(i64, f64)>,
@@ -132,6 +142,7 @@ const IN_ENCODER: usize = 1;
 const IN_PLACEMENTS: usize = 2;
 const OUT_TF: usize = 0;
 const OUT_STATIC: usize = 1;
+const OUT_JOINTS: usize = 2;
 const OUT_EVENTS: usize = 3;
 
 impl CArmPoseNode {
@@ -141,14 +152,11 @@ impl CArmPoseNode {
         Ok(Self {
             scan_id: cfg.scan_id,
             cfg,
-            start_ns: None,
-            scanning: false,
-            done: false,
+            scan: Scan::Idle,
             last_pub: i64::MIN,
             statics_sent: false,
             scans: 0,
             aborts: 0,
-            stopped_at: None,
             encoder: None,
             rest: None,
             start_requested: false,
@@ -206,13 +214,14 @@ impl CArmPoseNode {
         self.placements.extend(taken);
         Ok(())
     }
+    fn scanning(&self) -> bool {
+        matches!(self.scan, Scan::Running(_))
+    }
+    /// Speed mode: the travel at `now`.
     fn travel(&self, now: i64) -> f64 {
-        if let Some(t) = self.stopped_at {
-            return t;
-        }
         let dir = (self.cfg.end - self.cfg.start).signum();
-        match self.start_ns {
-            Some(t0) if now > t0 && !self.done => {
+        match self.scan {
+            Scan::Running(t0) if now > t0 => {
                 let t = self.cfg.start + dir * self.cfg.speed * (now - t0) as f64 * 1e-9;
                 if dir >= 0.0 {
                     t.min(self.cfg.end)
@@ -220,7 +229,7 @@ impl CArmPoseNode {
                     t.max(self.cfg.end)
                 }
             }
-            _ if self.done => self.cfg.end,
+            Scan::Ended(at) => at.unwrap_or(self.cfg.end),
             _ => self.cfg.start,
         }
     }
@@ -232,13 +241,13 @@ impl CArmPoseNode {
         }))
     }
 
-    /// Ends the current scan with `event` (END or ABORT) at `stamp`.
-    fn finish_scan(&mut self, stamp: i64, event: u8, why: &str, out: &mut Outbox) {
-        if !self.scanning {
+    /// Ends the current scan with `event` (END or ABORT) at `stamp`; speed mode: the C-arm
+    /// stands at `at` (None: at the end of travel).
+    fn finish_scan(&mut self, stamp: i64, event: u8, why: &str, at: Option<f64>, out: &mut Outbox) {
+        if !self.scanning() {
             return;
         }
-        self.scanning = false;
-        self.done = true;
+        self.scan = Scan::Ended(at);
         if event == ScanEvent::END {
             self.scans += 1;
             log::info!("c_arm_pose: scan {} ended ({why})", self.scan_id);
@@ -251,12 +260,10 @@ impl CArmPoseNode {
     }
 
     fn begin_scan(&mut self, stamp: i64, out: &mut Outbox) {
-        if self.scanning {
+        if self.scanning() {
             return;
         }
-        self.scanning = true;
-        self.done = false;
-        self.stopped_at = None;
+        self.scan = Scan::Running(stamp);
         out.publish(OUT_EVENTS, self.event(stamp, ScanEvent::START));
     }
 
@@ -275,7 +282,7 @@ impl CArmPoseNode {
             velocity: vec![velocity, 0.0],
             effort: vec![],
         };
-        out.publish(2, Msg::JointState(Arc::new(js)));
+        out.publish(OUT_JOINTS, Msg::JointState(Arc::new(js)));
     }
 
     /// One encoder sample.
@@ -305,18 +312,18 @@ impl CArmPoseNode {
         if self.rest.is_none() || moved {
             let was_at_rest = self.rest.is_some();
             self.rest = Some((stamp, travel));
-            if moved && was_at_rest && !self.scanning && (self.cfg.auto_start || self.start_requested) {
+            if moved && was_at_rest && !self.scanning() && (self.cfg.auto_start || self.start_requested) {
                 self.start_requested = false;
                 self.begin_scan(stamp, out);
             }
         } else if let Some((t_rest, _)) = self.rest {
-            if self.scanning && stamp - t_rest >= self.cfg.stop_ns {
+            if self.scanning() && stamp - t_rest >= self.cfg.stop_ns {
                 if (travel - self.cfg.end).abs() <= self.cfg.end_tol_m {
-                    self.finish_scan(stamp, ScanEvent::END, "the C-arm stopped at the end of travel", out);
+                    self.finish_scan(stamp, ScanEvent::END, "the C-arm stopped at the end of travel", None, out);
                 } else {
                     let why =
                         format!("stall: the C-arm stopped at {travel:.4} m, not at the end {:.4} m", self.cfg.end);
-                    self.finish_scan(stamp, ScanEvent::ABORT, &why, out);
+                    self.finish_scan(stamp, ScanEvent::ABORT, &why, None, out);
                 }
             }
         }
@@ -348,7 +355,7 @@ impl Component for CArmPoseNode {
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         let mut c = config(p)?;
-        if self.scanning {
+        if self.scanning() {
             return Err(Params::invalid("c_arm_pose", "parameters cannot change during a scan"));
         }
         // The same rig file: the placements followed so far stay.
@@ -368,23 +375,18 @@ impl Component for CArmPoseNode {
                         self.start_requested = true;
                     }
                     ScanEvent::START => {
-                        if !self.scanning {
-                            self.start_ns = Some(stamp);
-                            self.done = false;
-                            self.stopped_at = None;
+                        if !self.scanning() {
+                            self.scan = Scan::Scheduled(stamp);
                         }
                     }
-                    ScanEvent::END => {
-                        if !self.cfg.encoder {
-                            self.stopped_at = Some(self.travel(stamp));
-                        }
-                        self.finish_scan(stamp, ScanEvent::END, "END requested", out);
-                    }
-                    ScanEvent::ABORT => {
-                        if !self.cfg.encoder {
-                            self.stopped_at = Some(self.travel(stamp));
-                        }
-                        self.finish_scan(stamp, ScanEvent::ABORT, "ABORT requested", out);
+                    ScanEvent::END | ScanEvent::ABORT => {
+                        let (event, why) = if e.event == ScanEvent::END {
+                            (ScanEvent::END, "END requested")
+                        } else {
+                            (ScanEvent::ABORT, "ABORT requested")
+                        };
+                        let at = (!self.cfg.encoder).then(|| self.travel(stamp));
+                        self.finish_scan(stamp, event, why, at, out);
                     }
                     other => return Err(NodeError::new(format!("/scan/request: unknown event {other}"))),
                 }
@@ -398,7 +400,7 @@ impl Component for CArmPoseNode {
         }
     }
     fn tick(&mut self, now: i64, out: &mut Outbox) {
-        if !self.scanning && !self.placements.is_empty() {
+        if !self.scanning() && !self.placements.is_empty() {
             for (cam, e) in std::mem::take(&mut self.placements) {
                 let c = &mut self.cfg.rig.cameras[cam];
                 c.set_carm_from_optical(&e);
@@ -412,32 +414,32 @@ impl Component for CArmPoseNode {
         if !self.statics_sent {
             self.statics_sent = true;
             self.publish_statics(now, out);
-            if self.cfg.auto_start && !self.cfg.encoder {
-                self.start_ns = Some(now + self.cfg.delay_ns);
+            if self.cfg.auto_start && !self.cfg.encoder && !self.scanning() {
+                self.scan = Scan::Scheduled(now + self.cfg.delay_ns);
             }
         }
         if self.cfg.encoder {
             if let Some((t, _, _)) = self.encoder {
-                if self.scanning && now - t > self.cfg.max_gap_ns {
+                if self.scanning() && now - t > self.cfg.max_gap_ns {
                     let why = format!("pose gap: no /carm/encoder sample for {:.3} s", (now - t) as f64 * 1e-9);
-                    self.finish_scan(now, ScanEvent::ABORT, &why, out);
+                    self.finish_scan(now, ScanEvent::ABORT, &why, None, out);
                 }
             }
             return;
         }
-        if let Some(t0) = self.start_ns {
-            if !self.scanning && !self.done && now >= t0 {
-                self.scanning = true;
-                out.publish(3, self.event(t0, ScanEvent::START));
+        if let Scan::Scheduled(t0) = self.scan {
+            if now >= t0 {
+                self.scan = Scan::Running(t0);
+                out.publish(OUT_EVENTS, self.event(t0, ScanEvent::START));
             }
         }
         if now.saturating_sub(self.last_pub) >= self.cfg.period_ns {
             self.last_pub = now;
             let travel = self.travel(now);
-            let v = if self.scanning { self.cfg.speed } else { 0.0 };
+            let v = if self.scanning() { self.cfg.speed } else { 0.0 };
             self.publish_pose(now, travel, 0.0, v, out);
-            if self.scanning && (travel - self.cfg.end).abs() < 1e-12 {
-                self.finish_scan(now, ScanEvent::END, "travel_end_m reached", out);
+            if self.scanning() && (travel - self.cfg.end).abs() < 1e-12 {
+                self.finish_scan(now, ScanEvent::END, "travel_end_m reached", None, out);
             }
         }
     }

@@ -37,12 +37,12 @@ use crate::tf::TfBuffer;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
-use xsurf_core::fuse::{one_surface, FuseConfig};
+use xsurf_core::fuse::FuseConfig;
 use xsurf_core::geom::{Iso3, Plane};
-use xsurf_core::holes::fill_holes;
-use xsurf_core::mesh::{mesh_grid, Grid, Mesh, MeshConfig};
-use xsurf_core::register::{refine_grid, RefineConfig, RefineReport, ScanMotion};
-use xsurf_core::zipper::zipper;
+use xsurf_core::merge::refine::{refine_cameras, CarmMotion, Record, RefinementFile};
+use xsurf_core::merge::{merge_grids, MergeConfig, Merged};
+use xsurf_core::mesh::{Grid, Mesh, MeshConfig};
+use xsurf_core::register::{RefineConfig, RefineReport};
 use xsurf_formats::scene::{Scene, Surface, TexturedPlane};
 use xsurf_msgs::pointcloud;
 use xsurf_msgs::sensor_msgs::{CameraInfo, PointCloud2};
@@ -54,28 +54,12 @@ use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
 
-/// The scan's C-arm motion, from `table -> carm` on `/tf`.
-#[derive(Debug, Clone, Copy)]
-struct Motion {
-    /// The first pose of the scan.
-    first: Iso3,
-    /// The latest.
-    last: Iso3,
-    /// The rotation summed from pose to pose, radians.
-    turned_rad: f64,
-    /// The largest change of the tabletop's lateral offset or height from the first pose, m.
-    offset_m: f64,
-}
-
 struct Config {
     cameras: Vec<String>,
     refine: Option<(RefineConfig, Plane)>,
     save_rig_file: Option<PathBuf>,
     delay_ns: i64,
-    mesh: MeshConfig,
-    fuse: FuseConfig,
-    zipper: bool,
-    max_hole_edges: usize,
+    merge: MergeConfig,
     transparency: f32,
     output_dir: Option<PathBuf>,
     frame_id: String,
@@ -111,10 +95,12 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         save_rig_file: p.save_rig_file,
         cameras,
         delay_ns: (p.merge_delay_s * 1e9) as i64,
-        mesh,
-        fuse: FuseConfig { min_distance_m: p.fuse_distance_m, mesh, ..FuseConfig::default() },
-        zipper: p.zipper,
-        max_hole_edges: p.max_hole_edges,
+        merge: MergeConfig {
+            mesh,
+            fuse: FuseConfig { min_distance_m: p.fuse_distance_m, mesh, ..FuseConfig::default() },
+            zipper: p.zipper,
+            max_hole_edges: p.max_hole_edges,
+        },
         transparency: p.transparency,
         output_dir: p.output_dir,
         frame_id: p.frame_id,
@@ -160,7 +146,7 @@ pub struct MergerNode {
     /// `carm -> <cam>_optical_frame` from `/tf_static`.
     statics: TfBuffer,
     /// The scan's C-arm motion so far.
-    motion: Option<Motion>,
+    motion: Option<CarmMotion>,
     /// The last merge's cloud and mesh, published again between scans.
     last_outputs: crate::republish::Republisher,
 }
@@ -242,34 +228,10 @@ impl MergerNode {
             out.publish(2, Msg::Tf(Arc::new(placements)));
             self.save_rig(&refined);
         }
-        let fused = one_surface(&mut gs, &self.cfg.fuse);
-        self.fused_dropped += fused.dropped.iter().sum::<usize>() as u64;
-        let mut meshes: Vec<(String, Mesh)> =
-            names.into_iter().zip(&gs).map(|(n, g)| (n, mesh_grid(g, &self.cfg.mesh))).collect();
-        let mut merged = Mesh::default();
-        let mut camera = Vec::new();
-        for (k, (_, m)) in meshes.iter().enumerate() {
-            merged.append(m);
-            camera.extend(std::iter::repeat_n(k as u8, m.positions.len()));
-        }
-        if self.cfg.zipper && meshes.len() > 1 {
-            let before = merged.triangles.len();
-            let z = zipper(&mut merged, &camera, self.cfg.mesh.max_edge_m, self.cfg.mesh.min_angle_deg);
-            let h = fill_holes(&mut merged, self.cfg.mesh.max_edge_m, self.cfg.max_hole_edges);
-            self.seam_triangles += (z.bridges + z.closings + h.triangles) as u64;
-            // The seams are a surface of their own in the scene files.
-            let mut seams = Mesh {
-                positions: merged.positions.clone(),
-                colors: merged.colors.clone(),
-                triangles: merged.triangles[before..].to_vec(),
-                ..Mesh::default()
-            };
-            seams.remove_unreferenced();
-            seams.compute_normals();
-            if !seams.triangles.is_empty() {
-                meshes.push(("seams".into(), seams));
-            }
-        }
+        let Merged { surface: merged, meshes, fused_dropped, seam_triangles } =
+            merge_grids(&names, &mut gs, &self.cfg.merge);
+        self.fused_dropped += fused_dropped as u64;
+        self.seam_triangles += seam_triangles as u64;
         let header = convert::header(stamp, &self.cfg.frame_id);
         let pts = &merged.positions;
         let cloud = pointcloud::build(header.clone(), 1, pts.len() as u32, |_, c| {
@@ -302,78 +264,37 @@ impl MergerNode {
         self.merged_current = true;
     }
 
-    /// Refines each further camera's placement against the first camera's grid; returns the
-    /// placements refined and, per camera, what happened (for `refinement.json`). Refusals are
-    /// logged and counted.
-    fn refine(&mut self, names: &[String], grids: &mut [Grid]) -> (Vec<(String, Iso3)>, Vec<serde_json::Value>) {
+    /// Refines each further camera's placement against the first camera's grid
+    /// (`core::merge::refine`); returns the placements refined and, per camera, what happened
+    /// (for `refinement.json`). Each decision is logged and counted.
+    fn refine(&mut self, names: &[String], grids: &mut [Grid]) -> (Vec<(String, Iso3)>, Vec<Record>) {
         let Some((cfg, plane)) = self.cfg.refine else { return (Vec::new(), Vec::new()) };
         if grids.len() < 2 {
             return (Vec::new(), Vec::new());
         }
-        let scan = self.scan_id;
-        let mut records = Vec::new();
-        let mut refuse = |cams: &[String], calibrated: Option<&Iso3>, why: String| -> Vec<serde_json::Value> {
-            cams.iter()
-                .map(|cam| {
-                    self.refinements_refused += 1;
-                    log::warn!("merger: scan {scan}: {cam} keeps its calibrated placement: {why}");
-                    serde_json::json!({
-                        "camera": cam, "reference": names[0], "status": "refused", "reason": why,
-                        "calibrated": calibrated.map(placement_json),
-                    })
-                })
-                .collect()
-        };
-        let motion = match self.motion {
-            None => {
-                records.extend(refuse(&names[1..], None, "no table -> carm on /tf during the scan".into()));
-                return (Vec::new(), records);
-            }
-            Some(m) if m.turned_rad > MAX_ANGLE_CHANGE_RAD || m.offset_m > MAX_OFFSET_CHANGE_M => {
-                records.extend(refuse(
-                    &names[1..],
-                    None,
-                    format!(
-                        "table -> carm turned {:.3} deg in all and the tabletop moved up to {:.1} mm during the \
-                         scan; the refinement needs one angle and height per scan",
-                        m.turned_rad.to_degrees(),
-                        m.offset_m * 1e3
-                    ),
-                ));
-                return (Vec::new(), records);
-            }
-            Some(m) => ScanMotion { table_from_carm: m.first },
-        };
-        let (first, rest) = grids.split_at_mut(1);
-        let mut refined = Vec::new();
-        for (name, grid) in names[1..].iter().zip(rest) {
+        let statics = &self.statics;
+        let placement = |name: &str| {
             let frame = format!("{name}_optical_frame");
-            let Some(e) = self.statics.carm_from(&frame) else {
-                records.extend(refuse(std::slice::from_ref(name), None, format!("no carm -> {frame} on /tf_static")));
-                continue;
-            };
-            match refine_grid(&first[0], grid, &e, &plane, &motion, &cfg) {
-                Ok(r) => {
-                    log_refinement(scan, name, &names[0], &r);
+            statics.carm_from(&frame).ok_or_else(|| format!("no carm -> {frame} on /tf_static"))
+        };
+        let outcomes = refine_cameras(names, grids, placement, self.motion.as_ref(), &plane, &cfg);
+        let scan = self.scan_id;
+        let mut refined = Vec::new();
+        let mut records = Vec::new();
+        for o in outcomes {
+            let r = &o.record;
+            match &o.report {
+                Some(report) => {
+                    log_refinement(scan, &r.camera, &r.reference, report);
                     self.refinements += 1;
-                    refined.push((name.clone(), r.carm_from_optical));
-                    let t = r.translation_m;
-                    records.push(serde_json::json!({
-                        "camera": name, "reference": names[0], "status": "refined",
-                        "calibrated": placement_json(&e), "refined": placement_json(&r.carm_from_optical),
-                        "correction_m": [t.x, t.y, t.z], "correction_deg": r.rotation_deg,
-                        "iterations": r.iterations, "rms_before_m": r.rms_before_m, "rms_after_m": r.rms_after_m,
-                        "overlap_fraction": r.overlap_fraction, "points": r.points,
-                        "significance_sigma": r.significance, "sigma_translation_m": r.sigma_translation_m,
-                        "sigma_rotation_deg": r.sigma_rotation_deg,
-                        "reason": format!(
-                            "the correction is {:.0} standard deviations and lowers the RMS residual from {:.5} to {:.5} m",
-                            r.significance, r.rms_before_m, r.rms_after_m
-                        ),
-                    }));
+                    refined.push((r.camera.clone(), report.carm_from_optical));
                 }
-                Err(err) => records.extend(refuse(std::slice::from_ref(name), Some(&e), err.to_string())),
+                None => {
+                    self.refinements_refused += 1;
+                    log::warn!("merger: scan {scan}: {} keeps its calibrated placement: {}", r.camera, r.reason);
+                }
             }
+            records.push(o.record);
         }
         (refined, records)
     }
@@ -498,7 +419,7 @@ impl MergerNode {
         scan_id: u32,
         merged: &Mesh,
         meshes: &[(String, Mesh)],
-        refinement: &[serde_json::Value],
+        refinement: &[Record],
         scan_report: Option<&serde_json::Value>,
     ) {
         let Some(out) = self.cfg.output_dir.clone() else { return };
@@ -511,7 +432,8 @@ impl MergerNode {
             self.write_failed(format!("cannot write files in {}: {e}", dir.display()));
         }
         if !refinement.is_empty() {
-            self.write_json(&dir, "refinement.json", &serde_json::json!({ "scan_id": scan_id, "cameras": refinement }));
+            let file = RefinementFile { scan_id, cameras: refinement.to_vec() };
+            self.write_json(&dir, "refinement.json", &serde_json::to_value(file).unwrap_or_default());
         }
     }
 
@@ -546,17 +468,6 @@ impl MergerNode {
         }
         Ok(())
     }
-}
-
-/// Largest change of the C-arm angle during a scan for the refinement to run, radians.
-const MAX_ANGLE_CHANGE_RAD: f64 = 1e-4;
-/// Largest change of the C-arm's across / height offset during a scan, metres.
-const MAX_OFFSET_CHANGE_M: f64 = 1e-4;
-
-/// A placement `carm -> optical` as JSON: translation (m) and quaternion (x, y, z, w).
-fn placement_json(e: &Iso3) -> serde_json::Value {
-    let q = e.quaternion();
-    serde_json::json!({ "translation": e.translation.to_array(), "rotation": [q.x, q.y, q.z, q.w] })
 }
 
 fn log_refinement(scan: u32, name: &str, reference: &str, r: &RefineReport) {
@@ -728,20 +639,7 @@ impl Component for MergerNode {
                         && t.child_frame_id.trim_start_matches('/') == "carm"
                 }) {
                     let pose = convert::rigid(t).map_err(NodeError::new)?;
-                    self.motion = Some(match self.motion {
-                        None => Motion { first: pose, last: pose, turned_rad: 0.0, offset_m: 0.0 },
-                        Some(m) => {
-                            let d = pose.translation - m.first.translation;
-                            Motion {
-                                last: pose,
-                                // Summed from pose to pose, so a full turn reads 360 degrees,
-                                // not the 0 (or at most 180) between the first and the last.
-                                turned_rad: m.turned_rad + m.last.rotation.angle_to(&pose.rotation),
-                                offset_m: m.offset_m.max(d.x.abs()).max(d.z.abs()),
-                                ..m
-                            }
-                        }
-                    });
+                    self.motion = Some(self.motion.map_or(CarmMotion::start(pose), |m| m.then(pose)));
                 }
                 Ok(())
             }
@@ -807,7 +705,7 @@ mod tests {
         let names = vec!["cam1".to_string(), "cam2".to_string()];
         let (refined, records) = m.refine(&names, &mut [Grid::new(1), Grid::new(1)]);
         assert!(refined.is_empty());
-        let why = records[0]["reason"].as_str().unwrap();
+        let why = records[0].reason.as_str();
         assert!(why.contains("turned 358.450 deg"), "{why}");
     }
 
