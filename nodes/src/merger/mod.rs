@@ -225,7 +225,7 @@ impl MergerNode {
                     .map(|(name, e)| convert::transform_stamped(stamp, "carm", &format!("{name}_optical_frame"), e))
                     .collect(),
             };
-            out.publish(2, Msg::Tf(Arc::new(placements)));
+            out.publish(OUT_PLACEMENTS, Msg::Tf(Arc::new(placements)));
             self.save_rig(&refined);
         }
         let Merged { surface: merged, meshes, fused_dropped, seam_triangles } =
@@ -249,9 +249,9 @@ impl MergerNode {
             self.scan_id as i32,
             1.0 - self.cfg.transparency,
         )));
-        out.publish(0, cloud.clone());
-        out.publish(1, marker.clone());
-        self.last_outputs.set(vec![(0, cloud), (1, marker)]);
+        out.publish(OUT_CLOUD, cloud.clone());
+        out.publish(OUT_MESH, marker.clone());
+        self.last_outputs.set(vec![(OUT_CLOUD, cloud), (OUT_MESH, marker)]);
         self.write(self.scan_id, &merged, &meshes, &refinement, Some(&scan_report));
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
@@ -530,29 +530,62 @@ fn write_files(
     Ok(())
 }
 
+/// The merger's outputs, in the order `outputs()` lists them.
+const OUT_CLOUD: usize = 0;
+const OUT_MESH: usize = 1;
+const OUT_PLACEMENTS: usize = 2;
+
+/// The merger's inputs, in the order `inputs()` lists them: a cloud per camera, the scan
+/// events, the radiograph overlay, `/tf`, `/tf_static`, a camera_info per camera, the reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Input {
+    /// `/<camera>/cloud` of camera `k` of `cameras`.
+    Cloud(usize),
+    /// `/scan/events`.
+    Events,
+    /// `/xray/overlay`.
+    Overlay,
+    /// `/tf`.
+    Tf,
+    /// `/tf_static`.
+    TfStatic,
+    /// `/<camera>/camera_info` of camera `k`.
+    CameraInfo(usize),
+    /// `/scan/report`.
+    Report,
+}
+
+impl MergerNode {
+    fn input_list(&self) -> Vec<Input> {
+        let n = self.cfg.cameras.len();
+        let mut v: Vec<Input> = (0..n).map(Input::Cloud).collect();
+        v.extend([Input::Events, Input::Overlay, Input::Tf, Input::TfStatic]);
+        v.extend((0..n).map(Input::CameraInfo));
+        v.push(Input::Report);
+        v
+    }
+    fn input_port(&self, input: Input) -> Port {
+        let cam = |k: usize| self.cfg.cameras[k].as_str();
+        match input {
+            Input::Cloud(k) => Port::new(&format!("/{}/cloud", cam(k)), PointCloud2::TYPE_NAME, QosClass::State),
+            Input::Events => Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
+            Input::Overlay => Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::State),
+            Input::Tf => Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable),
+            Input::TfStatic => Port::new("/tf_static", TFMessage::TYPE_NAME, QosClass::Static),
+            Input::CameraInfo(k) => {
+                Port::new(&format!("/{}/camera_info", cam(k)), CameraInfo::TYPE_NAME, QosClass::Sensor)
+            }
+            Input::Report => Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
+        }
+    }
+}
+
 impl Component for MergerNode {
     fn node_name(&self) -> &'static str {
         "merger"
     }
     fn inputs(&self) -> Vec<Port> {
-        let mut v: Vec<Port> = self
-            .cfg
-            .cameras
-            .iter()
-            .map(|c| Port::new(&format!("/{c}/cloud"), PointCloud2::TYPE_NAME, QosClass::State))
-            .collect();
-        v.push(Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable));
-        v.push(Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::State));
-        v.push(Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable));
-        v.push(Port::new("/tf_static", TFMessage::TYPE_NAME, QosClass::Static));
-        v.extend(
-            self.cfg
-                .cameras
-                .iter()
-                .map(|c| Port::new(&format!("/{c}/camera_info"), CameraInfo::TYPE_NAME, QosClass::Sensor)),
-        );
-        v.push(Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable));
-        v
+        self.input_list().into_iter().map(|i| self.input_port(i)).collect()
     }
     fn outputs(&self) -> Vec<Port> {
         vec![
@@ -573,15 +606,17 @@ impl Component for MergerNode {
         Ok(())
     }
     fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
-        let n = self.cfg.cameras.len();
-        match (input, msg) {
-            (i, Msg::Cloud(c)) if i < n => {
+        let Some(&port) = self.input_list().get(input) else {
+            return Err(NodeError::new(format!("no input {input}")));
+        };
+        match (port, msg) {
+            (Input::Cloud(i), Msg::Cloud(c)) => {
                 let grid = self.check_cloud(i, c).inspect_err(|_| self.bad_clouds += 1)?;
                 self.clouds.insert(i, (c.header.stamp.nanos(), grid));
                 self.merged_current = false;
                 Ok(())
             }
-            (i, Msg::Text(t)) if i == 2 * n + 4 => {
+            (Input::Report, Msg::Text(t)) => {
                 let r: serde_json::Value = serde_json::from_str(&t.data)
                     .map_err(|e| NodeError::new(format!("/scan/report: not JSON: {e}")))?;
                 let cam = r["camera"].as_str().unwrap_or("").to_string();
@@ -596,7 +631,7 @@ impl Component for MergerNode {
                 }
                 Ok(())
             }
-            (i, Msg::CameraInfo(info)) if (n + 4..2 * n + 4).contains(&i) => {
+            (Input::CameraInfo(i), Msg::CameraInfo(info)) => {
                 let (w, h) = (info.width, info.height);
                 if !xsurf_core::limits::image_side_ok(w) || !xsurf_core::limits::image_side_ok(h) {
                     return Err(NodeError::new(format!(
@@ -604,10 +639,10 @@ impl Component for MergerNode {
                         xsurf_core::limits::image_side_text()
                     )));
                 }
-                self.camera_sizes.insert(i - n - 4, (w, h));
+                self.camera_sizes.insert(i, (w, h));
                 Ok(())
             }
-            (i, Msg::ScanEvent(e)) if i == n => {
+            (Input::Events, Msg::ScanEvent(e)) => {
                 match e.event {
                     ScanEvent::START => {
                         if self.pending_deadline.is_some() {
@@ -632,8 +667,8 @@ impl Component for MergerNode {
                 }
                 Ok(())
             }
-            (i, Msg::Marker(m)) if i == n + 1 => self.overlay(m),
-            (i, Msg::Tf(t)) if i == n + 2 => {
+            (Input::Overlay, Msg::Marker(m)) => self.overlay(m),
+            (Input::Tf, Msg::Tf(t)) => {
                 for t in t.transforms.iter().filter(|t| {
                     t.header.frame_id.trim_start_matches('/') == self.cfg.frame_id
                         && t.child_frame_id.trim_start_matches('/') == "carm"
@@ -643,8 +678,8 @@ impl Component for MergerNode {
                 }
                 Ok(())
             }
-            (i, Msg::Tf(t)) if i == n + 3 => self.statics.add_static(t).map_err(NodeError::new),
-            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+            (Input::TfStatic, Msg::Tf(t)) => self.statics.add_static(t).map_err(NodeError::new),
+            (port, m) => Err(NodeError::new(format!("unexpected {} on {port:?}", m.type_name()))),
         }
     }
     fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
