@@ -209,80 +209,94 @@ fn clear_outputs(dir: &Path, cameras: &[String]) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Runs the reconstruction and writes the files and `report.json`.
-pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
-    let t_start = Instant::now();
-    let bag = Bag::open(&opts.bag)?;
-    if bag.indexed.is_some() {
-        log::warn!(
-            "{}: no metadata.yaml; read from its storage files (`xsurf bag reindex {}` writes one)",
-            opts.bag.display(),
-            opts.bag.display()
-        );
-    }
-    let meta = &bag.metadata;
-    let topic_type: BTreeMap<&str, &str> =
-        meta.topics.iter().map(|t| (t.name.as_str(), t.type_name.as_str())).collect();
-    // Cameras: namespaces of /<cam>/image_raw and /<cam>/image_raw/compressed.
-    let mut cameras: Vec<String> = Vec::new();
-    let mut transports: BTreeMap<String, Vec<&str>> = BTreeMap::new();
-    for t in &meta.topics {
-        let (ns, transport, ty) = if let Some(ns) = t.name.strip_suffix("/image_raw/compressed") {
-            (ns, "compressed", "sensor_msgs/msg/CompressedImage")
-        } else if let Some(ns) = t.name.strip_suffix("/image_raw") {
-            (ns, "raw", "sensor_msgs/msg/Image")
-        } else {
-            continue;
-        };
-        let cam = ns.trim_start_matches('/');
-        if cam.is_empty() || cam.contains('/') {
-            bail!("topic {}: expected /<camera>/image_raw or /<camera>/image_raw/compressed", t.name);
+/// What a reconstruction needs to know of a bag: its cameras and their image transports, and
+/// whether it has scan events. Each topic the graph reads is checked for its type first, so a
+/// wrong bag is named before any work.
+struct BagTopics<'a> {
+    /// Topic name to type.
+    types: BTreeMap<&'a str, &'a str>,
+    /// The cameras: namespaces of `/<cam>/image_raw` and `/<cam>/image_raw/compressed`.
+    cameras: Vec<String>,
+    /// Each camera's transports in the bag (`raw`, `compressed`).
+    transports: BTreeMap<String, Vec<&'static str>>,
+}
+
+impl<'a> BagTopics<'a> {
+    fn inspect(bag: &'a Bag, path: &Path) -> anyhow::Result<BagTopics<'a>> {
+        let meta = &bag.metadata;
+        let types: BTreeMap<&str, &str> = meta.topics.iter().map(|t| (t.name.as_str(), t.type_name.as_str())).collect();
+        let mut cameras: Vec<String> = Vec::new();
+        let mut transports: BTreeMap<String, Vec<&'static str>> = BTreeMap::new();
+        for t in &meta.topics {
+            let (ns, transport, ty) = if let Some(ns) = t.name.strip_suffix("/image_raw/compressed") {
+                (ns, "compressed", "sensor_msgs/msg/CompressedImage")
+            } else if let Some(ns) = t.name.strip_suffix("/image_raw") {
+                (ns, "raw", "sensor_msgs/msg/Image")
+            } else {
+                continue;
+            };
+            let cam = ns.trim_start_matches('/');
+            if cam.is_empty() || cam.contains('/') {
+                bail!("topic {}: expected /<camera>/image_raw or /<camera>/image_raw/compressed", t.name);
+            }
+            if t.type_name != ty {
+                bail!("topic {} has type {}, expected {ty}", t.name, t.type_name);
+            }
+            if !cameras.iter().any(|c| c == cam) {
+                cameras.push(cam.to_string());
+            }
+            transports.entry(cam.to_string()).or_default().push(transport);
         }
-        if t.type_name != ty {
-            bail!("topic {} has type {}, expected {ty}", t.name, t.type_name);
+        if cameras.is_empty() {
+            bail!(
+                "{}: no /<camera>/image_raw (or image_raw/compressed) topic in the bag (topics: {})",
+                path.display(),
+                meta.topics.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ")
+            );
         }
-        if !cameras.iter().any(|c| c == cam) {
-            cameras.push(cam.to_string());
+        let bag_topics = BagTopics { types, cameras, transports };
+        bag_topics.check_types()?;
+        Ok(bag_topics)
+    }
+
+    /// The camera_info of every camera, `/tf` and `/tf_static` are there with their types, and
+    /// `/scan/events` has its type if it is there.
+    fn check_types(&self) -> anyhow::Result<()> {
+        for cam in &self.cameras {
+            for (suffix, ty) in USED_TYPES {
+                let topic = format!("/{cam}/{suffix}");
+                match self.types.get(topic.as_str()) {
+                    None => bail!("no {topic} in the bag: camera {cam} cannot be triangulated without its intrinsics"),
+                    Some(t) if t != ty => bail!("topic {topic} has type {t}, expected {ty}"),
+                    _ => {}
+                }
+            }
         }
-        transports.entry(cam.to_string()).or_default().push(transport);
-    }
-    if cameras.is_empty() {
-        bail!(
-            "{}: no /<camera>/image_raw (or image_raw/compressed) topic in the bag (topics: {})",
-            opts.bag.display(),
-            meta.topics.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ")
-        );
-    }
-    for cam in &cameras {
-        for (suffix, ty) in USED_TYPES {
-            let topic = format!("/{cam}/{suffix}");
-            match topic_type.get(topic.as_str()) {
-                None => bail!("no {topic} in the bag: camera {cam} cannot be triangulated without its intrinsics"),
-                Some(t) if t != ty => bail!("topic {topic} has type {t}, expected {ty}"),
+        for (topic, ty) in [("/tf", "tf2_msgs/msg/TFMessage"), ("/tf_static", "tf2_msgs/msg/TFMessage")] {
+            match self.types.get(topic) {
+                None => bail!(
+                    "no {topic} in the bag: the frames cannot be placed (table -> carm and carm -> camera are needed)"
+                ),
+                Some(t) if *t != ty => bail!("topic {topic} has type {t}, expected {ty}"),
                 _ => {}
             }
         }
-    }
-    for (topic, ty) in [("/tf", "tf2_msgs/msg/TFMessage"), ("/tf_static", "tf2_msgs/msg/TFMessage")] {
-        match topic_type.get(topic) {
-            None => bail!(
-                "no {topic} in the bag: the frames cannot be placed (table -> carm and carm -> camera are needed)"
-            ),
-            Some(t) if *t != ty => bail!("topic {topic} has type {t}, expected {ty}"),
-            _ => {}
-        }
-    }
-    if let Some(t) = topic_type.get("/scan/events") {
-        if *t != "xsurf_msgs/msg/ScanEvent" {
-            bail!("topic /scan/events has type {t}, expected xsurf_msgs/msg/ScanEvent");
+        match self.types.get("/scan/events") {
+            Some(t) if *t != "xsurf_msgs/msg/ScanEvent" => {
+                bail!("topic /scan/events has type {t}, expected xsurf_msgs/msg/ScanEvent")
+            }
+            _ => Ok(()),
         }
     }
 
-    if opts.out.as_os_str().is_empty() {
-        bail!("--out: an empty path; name the folder the reconstruction is written to");
+    /// A bag without `/scan/events` is one scan (scan 0, as the mesher and merger take it).
+    fn implicit_scan(&self) -> bool {
+        !self.types.contains_key("/scan/events")
     }
-    std::fs::create_dir_all(&opts.out).with_context(|| format!("cannot create {}", opts.out.display()))?;
-    clear_outputs(&opts.out, &cameras)?;
+}
+
+/// The ROS 2 arguments of a reconstruction: the params file, then the `-p` rules.
+fn ros_args(opts: &Options) -> anyhow::Result<RosArgs> {
     let mut args: Vec<String> = vec!["--ros-args".into()];
     if let Some(f) = &opts.params_file {
         if let Some(why) = xsurf_formats::file_problem(f) {
@@ -293,37 +307,38 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     for p in &opts.params {
         args.extend(["-p".into(), p.clone()]);
     }
-    let ros = RosArgs::parse(&args)?;
-    let out_dir = opts.out.to_string_lossy().into_owned();
+    Ok(RosArgs::parse(&args)?)
+}
+
+/// The processing graph of a bag in a [`Router`]: the registry's per-camera nodes in each
+/// camera's namespace, the merger, and the X-ray aligner when a radiograph is given, with
+/// parameters resolved as for the live nodes. Returns the router and, for a radiograph that
+/// cannot be read, why (the surface is still reconstructed).
+fn build_graph(topics: &BagTopics, ros: &RosArgs, opts: &Options) -> anyhow::Result<(Router, Option<String>)> {
+    let out_dir = ParamValue::String(opts.out.to_string_lossy().into_owned());
     let mut router = Router::new();
-    let mut xray_error = None;
     let build = |node: &str,
                  ns: &str,
                  extra: &[(&str, ParamValue)]|
      -> anyhow::Result<Box<dyn xsurf_runtime::component::Component>> {
         let fq = fq_name(ns, node);
-        let (_, params) = components::resolve(node, &fq, &ros, extra).map_err(anyhow::Error::msg)?;
+        let (_, params) = components::resolve(node, &fq, ros, extra).map_err(anyhow::Error::msg)?;
         components::build(node, &params).with_context(|| format!("node {fq}"))
     };
-    for cam in &cameras {
+    for cam in &topics.cameras {
         let ns = format!("/{cam}");
-        let transport = image_transport(cam, &transports[cam], &ros.param_overrides(&fq_name(&ns, "edge_detector"))?)?;
-        router.add(
-            build("edge_detector", &ns, &[("image_transport", ParamValue::String(transport.into()))])?,
-            "edge_detector",
-            &ns,
-            &ros.remaps,
-        );
-        router.add(build("triangulator", &ns, &[])?, "triangulator", &ns, &ros.remaps);
-        router.add(
-            build("mesher", &ns, &[("output_dir", ParamValue::String(out_dir.clone()))])?,
-            "mesher",
-            &ns,
-            &ros.remaps,
-        );
+        let transport =
+            image_transport(cam, &topics.transports[cam], &ros.param_overrides(&fq_name(&ns, "edge_detector"))?)?;
+        for node in components::NODES.iter().filter(|t| t.role == components::Role::PerCamera) {
+            let extra = match node.name {
+                "edge_detector" => vec![("image_transport", ParamValue::String(transport.into()))],
+                "mesher" => vec![("output_dir", out_dir.clone())],
+                _ => vec![],
+            };
+            router.add(build(node.name, &ns, &extra)?, node.name, &ns, &ros.remaps);
+        }
     }
-    let implicit_scan = !topic_type.contains_key("/scan/events");
-    let mut implicit_span: Option<(i64, i64)> = None;
+    let mut xray_error = None;
     if let Some(x) = &opts.xray {
         if let Some(why) = xsurf_formats::file_problem(x) {
             bail!("--xray {}: {why}", x.display());
@@ -335,12 +350,10 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
             xray_error = Some(e.to_string());
         } else {
             let file = ParamValue::String(x.to_string_lossy().into_owned());
-            let dir = ParamValue::String(out_dir.clone());
-            // A bag without /scan/events is one scan (scan 0, as the mesher and merger take it):
-            // the radiograph's exposure is then the travel from its first frame to its last,
-            // given to the aligner alone as START and END on a topic of its own.
+            // Without /scan/events the radiograph's exposure is the travel from the bag's first
+            // frame to its last, given to the aligner alone as START and END on a topic of its own.
             let mut remaps = ros.remaps.clone();
-            if implicit_scan {
+            if topics.implicit_scan() {
                 remaps.insert(
                     0,
                     xsurf_runtime::rosargs::Remap {
@@ -351,7 +364,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
                 );
             }
             router.add(
-                build("xray_aligner", "/", &[("dicom_file", file), ("output_dir", dir)])?,
+                build("xray_aligner", "/", &[("dicom_file", file), ("output_dir", out_dir.clone())])?,
                 "xray_aligner",
                 "/",
                 &remaps,
@@ -360,6 +373,7 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     }
     // The merger's cameras: the bag's, or the ones its `cameras` parameter names (first = the
     // reference), each of which the bag must hold.
+    let cameras = &topics.cameras;
     let merged_cameras = match ros.param_overrides(&fq_name("/", "merger"))?.get("cameras") {
         None => cameras.clone(),
         Some(ParamValue::StringArray(list)) => {
@@ -374,212 +388,299 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
         Some(v) => bail!("parameter /merger cameras: {v:?} is not a list of camera names"),
     };
     let cams_param = ParamValue::StringArray(merged_cameras);
-    router.add(
-        build("merger", "/", &[("output_dir", ParamValue::String(out_dir.clone())), ("cameras", cams_param)])?,
-        "merger",
-        "/",
-        &ros.remaps,
-    );
+    router.add(build("merger", "/", &[("output_dir", out_dir), ("cameras", cams_param)])?, "merger", "/", &ros.remaps);
+    Ok((router, xray_error))
+}
 
-    // What the graph computes itself is not taken from the bag (a bag recorded from a live
-    // graph holds its clouds, meshes and scan reports too).
-    // (Shared topics, /tf and the scan events, come from outside even where a node publishes.)
-    let computed: std::collections::BTreeSet<String> = router
-        .output_topics()
-        .into_iter()
-        .filter(|(t, p)| !xsurf_runtime::router::is_shared(t, p.type_name))
-        .map(|(t, _)| t)
-        .collect();
-    let mut report = Report {
-        bag: opts.bag.display().to_string(),
-        cameras: cameras.clone(),
-        messages_read: 0,
-        frames_read: BTreeMap::new(),
-        frames_with_line: BTreeMap::new(),
-        points: BTreeMap::new(),
-        triangles: BTreeMap::new(),
-        surface_points: BTreeMap::new(),
-        merged_points: 0,
-        merged_triangles: 0,
-        scans: Vec::new(),
-        dropped_frames: BTreeMap::new(),
-        timings_s: BTreeMap::new(),
-        frames_per_second: 0.0,
-        peak_rss_bytes: None,
-        truncated: None,
-        undecodable: BTreeMap::new(),
-        unused_topics: meta
-            .topics
+/// The bag's messages fed to the graph in file order, with the progress on stderr: what the
+/// graph computes itself, or no node reads, is passed over. Returns the images fed and the
+/// seconds spent decoding.
+struct Replay<'a> {
+    router: &'a mut Router,
+    /// Topics the graph computes itself (a bag recorded from a live graph holds its clouds,
+    /// meshes and scan reports too); shared topics, `/tf` and the scan events, come from
+    /// outside even where a node publishes.
+    computed: std::collections::BTreeSet<String>,
+    /// For a bag without scan events: the first and last image stamps so far.
+    implicit_span: Option<Option<(i64, i64)>>,
+    images: u64,
+    read_s: f64,
+}
+
+impl<'a> Replay<'a> {
+    fn new(router: &'a mut Router, implicit_scan: bool) -> Replay<'a> {
+        let computed = router
+            .output_topics()
+            .into_iter()
+            .filter(|(t, p)| !xsurf_runtime::router::is_shared(t, p.type_name))
+            .map(|(t, _)| t)
+            .collect();
+        Replay { router, computed, implicit_span: implicit_scan.then_some(None), images: 0, read_s: 0.0 }
+    }
+
+    /// True for a topic of the bag the graph takes.
+    fn takes(&self, topic: &str) -> bool {
+        self.router.has_subscriber(topic) && !self.computed.contains(topic)
+    }
+
+    /// Feeds every message; a bag cut short ends the feed with its error in the report.
+    fn run(&mut self, bag: &Bag, opts: &Options, report: &mut Report) {
+        let total_images: u64 = report
+            .cameras
             .iter()
-            .filter(|t| !router.has_subscriber(&t.name) || computed.contains(&t.name))
-            .map(|t| t.name.clone())
-            .collect(),
-        nodes: Vec::new(),
-        files: Vec::new(),
-        xray: None,
-        scan_reports: Vec::new(),
-    };
-    let total_images: u64 = cameras
-        .iter()
-        .map(|c| {
-            let topic = match router.has_subscriber(&format!("/{c}/image_raw/compressed")) {
-                true => format!("/{c}/image_raw/compressed"),
-                false => format!("/{c}/image_raw"),
+            .map(|c| {
+                let topic = match self.router.has_subscriber(&format!("/{c}/image_raw/compressed")) {
+                    true => format!("/{c}/image_raw/compressed"),
+                    false => format!("/{c}/image_raw"),
+                };
+                bag.metadata.topics.iter().find(|t| t.name == topic).map_or(0, |t| t.message_count)
+            })
+            .sum();
+        let mut progress = Progress::new(opts.progress, total_images);
+        for m in bag.messages() {
+            let m = match m {
+                Ok(m) => m,
+                Err(e) => {
+                    log::error!("{e}; reconstructing what was read before it");
+                    report.truncated = Some(e.to_string());
+                    break;
+                }
             };
-            meta.topics.iter().find(|t| t.name == topic).map_or(0, |t| t.message_count)
-        })
-        .sum();
-    let tty = opts.progress && std::io::stderr().is_terminal();
-    let mut images = 0u64;
-    let mut last_report = Instant::now();
-    let t_read = Instant::now();
-    let mut read_s = 0.0;
-    for m in bag.messages() {
-        let m = match m {
-            Ok(m) => m,
-            Err(e) => {
-                log::error!("{e}; reconstructing what was read before it");
-                report.truncated = Some(e.to_string());
-                break;
+            report.messages_read += 1;
+            if self.takes(&m.topic) {
+                self.feed(&m, report);
+                progress.show(self.images);
             }
-        };
-        report.messages_read += 1;
-        if !router.has_subscriber(&m.topic) || computed.contains(&m.topic) {
-            continue;
         }
+        if let Some(Some((_, last))) = self.implicit_span {
+            self.router.publish(IMPLICIT_SCAN_TOPIC, &scan_event(last, xsurf_msgs::xsurf_msgs::ScanEvent::END));
+            self.router.tick(last);
+        }
+        self.router.finish();
+        progress.end();
+    }
+
+    fn feed(&mut self, m: &xsurf_formats::bag::RawMessage, report: &mut Report) {
         let t_dec = Instant::now();
         let msg = match Msg::decode(&m.type_name, &m.data) {
             Ok(msg) => msg,
             Err(e) => {
                 *report.undecodable.entry(m.topic.clone()).or_default() += 1;
                 log::warn!("{} at {}: {e}", m.topic, crate::convert::fmt_stamp(m.log_time_ns as i64));
-                continue;
+                return;
             }
         };
-        read_s += t_dec.elapsed().as_secs_f64();
+        self.read_s += t_dec.elapsed().as_secs_f64();
         if let Some(cam) = m.topic.strip_suffix("/image_raw").or_else(|| m.topic.strip_suffix("/image_raw/compressed"))
         {
-            if let (true, Some(stamp)) = (implicit_scan, msg.stamp_ns()) {
-                if implicit_span.is_none() {
-                    router.publish(IMPLICIT_SCAN_TOPIC, &scan_event(stamp, xsurf_msgs::xsurf_msgs::ScanEvent::START));
+            if let (Some(span), Some(stamp)) = (self.implicit_span.as_mut(), msg.stamp_ns()) {
+                if span.is_none() {
+                    self.router
+                        .publish(IMPLICIT_SCAN_TOPIC, &scan_event(stamp, xsurf_msgs::xsurf_msgs::ScanEvent::START));
                 }
-                let (a, z) = implicit_span.unwrap_or((stamp, stamp));
-                implicit_span = Some((a.min(stamp), z.max(stamp)));
+                let (a, z) = span.unwrap_or((stamp, stamp));
+                *span = Some((a.min(stamp), z.max(stamp)));
             }
-            images += 1;
+            self.images += 1;
             *report.frames_read.entry(cam.trim_start_matches('/').to_string()).or_default() += 1;
         }
-        router.publish(&m.topic, &msg);
-        router.tick(m.log_time_ns as i64);
-        if opts.progress && (last_report.elapsed().as_secs_f64() > if tty { 0.2 } else { 2.0 }) {
-            last_report = Instant::now();
-            let fps = images as f64 / t_read.elapsed().as_secs_f64().max(1e-9);
-            if tty {
-                let w = 30usize;
-                let done = ((images as f64 / total_images.max(1) as f64) * w as f64) as usize;
-                eprint!(
-                    "\r[{}{}] {images}/{total_images} frames, {fps:.0} frames/s ",
-                    "#".repeat(done.min(w)),
-                    " ".repeat(w - done.min(w))
-                );
-            } else {
-                eprintln!("reconstruct: {images}/{total_images} frames, {fps:.0} frames/s");
-            }
+        self.router.publish(&m.topic, &msg);
+        self.router.tick(m.log_time_ns as i64);
+    }
+}
+
+/// The progress of a reconstruction on stderr: a bar on a terminal, a line every 2 s otherwise.
+struct Progress {
+    on: bool,
+    tty: bool,
+    total: u64,
+    started: Instant,
+    last: Instant,
+}
+
+impl Progress {
+    fn new(on: bool, total: u64) -> Progress {
+        let now = Instant::now();
+        Progress { on, tty: on && std::io::stderr().is_terminal(), total, started: now, last: now }
+    }
+    fn show(&mut self, images: u64) {
+        if !self.on || self.last.elapsed().as_secs_f64() <= if self.tty { 0.2 } else { 2.0 } {
+            return;
+        }
+        self.last = Instant::now();
+        let fps = images as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
+        let total = self.total;
+        if self.tty {
+            let w = 30usize;
+            let done = ((images as f64 / total.max(1) as f64) * w as f64) as usize;
+            eprint!(
+                "\r[{}{}] {images}/{total} frames, {fps:.0} frames/s ",
+                "#".repeat(done.min(w)),
+                " ".repeat(w - done.min(w))
+            );
+        } else {
+            eprintln!("reconstruct: {images}/{total} frames, {fps:.0} frames/s");
         }
     }
-    if let (true, Some((_, last))) = (implicit_scan, implicit_span) {
-        router.publish(IMPLICIT_SCAN_TOPIC, &scan_event(last, xsurf_msgs::xsurf_msgs::ScanEvent::END));
-        router.tick(last);
+    fn end(&self) {
+        if self.tty {
+            eprintln!();
+        }
     }
-    router.finish();
-    if tty {
-        eprintln!();
+}
+
+impl Report {
+    /// An empty report of `bag`, listing the topics the graph does not take.
+    fn start(opts: &Options, topics: &BagTopics, bag: &Bag, replay: &Replay) -> Report {
+        Report {
+            bag: opts.bag.display().to_string(),
+            cameras: topics.cameras.clone(),
+            messages_read: 0,
+            frames_read: BTreeMap::new(),
+            frames_with_line: BTreeMap::new(),
+            points: BTreeMap::new(),
+            triangles: BTreeMap::new(),
+            surface_points: BTreeMap::new(),
+            merged_points: 0,
+            merged_triangles: 0,
+            scans: Vec::new(),
+            dropped_frames: BTreeMap::new(),
+            timings_s: BTreeMap::new(),
+            frames_per_second: 0.0,
+            peak_rss_bytes: None,
+            truncated: None,
+            undecodable: BTreeMap::new(),
+            unused_topics: bag
+                .metadata
+                .topics
+                .iter()
+                .filter(|t| !replay.takes(&t.name))
+                .map(|t| t.name.clone())
+                .collect(),
+            nodes: Vec::new(),
+            files: Vec::new(),
+            xray: None,
+            scan_reports: Vec::new(),
+        }
     }
 
-    // Figures.
-    let mut stage = BTreeMap::<String, f64>::new();
-    for n in router.nodes() {
-        let counters: BTreeMap<String, u64> =
-            n.component.counters().into_iter().map(|(k, v)| (k.to_string(), v)).collect();
-        let cam = n.namespace.trim_start_matches('/').to_string();
-        let get = |k: &str| counters.get(k).copied().unwrap_or(0);
-        match n.name.as_str() {
-            "edge_detector" => {
-                report.frames_with_line.insert(cam.clone(), get("frames_with_line"));
+    /// The figures of every node (its counters), and the time each stage took.
+    fn collect(&mut self, router: &Router, implicit_scan: bool, xray_error: Option<String>) {
+        for n in router.nodes() {
+            let counters: BTreeMap<String, u64> =
+                n.component.counters().into_iter().map(|(k, v)| (k.to_string(), v)).collect();
+            let cam = n.namespace.trim_start_matches('/').to_string();
+            let get = |k: &str| counters.get(k).copied().unwrap_or(0);
+            match n.name.as_str() {
+                "edge_detector" => {
+                    self.frames_with_line.insert(cam.clone(), get("frames_with_line"));
+                }
+                "triangulator" => {
+                    self.points.insert(cam.clone(), get("points"));
+                }
+                "mesher" => {
+                    self.triangles.insert(cam.clone(), get("triangles"));
+                    self.surface_points.insert(cam.clone(), get("mesh_points"));
+                    self.dropped_frames.insert(cam.clone(), get("dropped_frames"));
+                }
+                "merger" => {
+                    self.merged_points = get("points");
+                    self.merged_triangles = get("triangles");
+                }
+                "xray_aligner" => {
+                    self.xray = Some(if get("placed") > 0 && implicit_scan {
+                        "placed (exposure: the bag's first to last frame, as it has no /scan/events)".to_string()
+                    } else if get("placed") > 0 {
+                        "placed".to_string()
+                    } else {
+                        format!("not placed: {}", n.last_error.clone().unwrap_or_else(|| "see the log".into()))
+                    });
+                }
+                _ => {}
             }
-            "triangulator" => {
-                report.points.insert(cam.clone(), get("points"));
-            }
-            "mesher" => {
-                report.triangles.insert(cam.clone(), get("triangles"));
-                report.surface_points.insert(cam.clone(), get("mesh_points"));
-                report.dropped_frames.insert(cam.clone(), get("dropped_frames"));
-            }
-            "merger" => {
-                report.merged_points = get("points");
-                report.merged_triangles = get("triangles");
-            }
-            "xray_aligner" => {
-                report.xray = Some(if get("placed") > 0 && implicit_scan {
-                    "placed (exposure: the bag's first to last frame, as it has no /scan/events)".to_string()
-                } else if get("placed") > 0 {
-                    "placed".to_string()
-                } else {
-                    format!("not placed: {}", n.last_error.clone().unwrap_or_else(|| "see the log".into()))
-                });
-            }
-            _ => {}
+            *self.timings_s.entry(n.name.clone()).or_default() += n.busy_ns as f64 * 1e-9;
+            self.nodes.push(NodeReport {
+                node: n.fq_name(),
+                messages: n.handled,
+                errors: n.errors,
+                seconds: n.busy_ns as f64 * 1e-9,
+                counters,
+                last_error: n.last_error.clone(),
+                problems: n.component.problems(),
+            });
         }
-        *stage.entry(n.name.clone()).or_default() += n.busy_ns as f64 * 1e-9;
-        report.nodes.push(NodeReport {
-            node: n.fq_name(),
-            messages: n.handled,
-            errors: n.errors,
-            seconds: n.busy_ns as f64 * 1e-9,
-            counters,
-            last_error: n.last_error.clone(),
-            problems: n.component.problems(),
-        });
+        if let Some(e) = xray_error {
+            self.xray = Some(format!("not placed: {e}"));
+        }
     }
-    if let Some(e) = xray_error {
-        report.xray = Some(format!("not placed: {e}"));
+
+    /// The scans' folders: their ids and scan reports; one scan's files are moved up into
+    /// `out` itself. Then the list of files and `report.json`.
+    fn finish_files(&mut self, out: &Path) -> anyhow::Result<()> {
+        let mut scan_dirs: Vec<(u32, PathBuf)> = std::fs::read_dir(out)?
+            .filter_map(|e| e.ok())
+            .filter_map(|e| {
+                let name = e.file_name().to_string_lossy().into_owned();
+                let id = name.strip_prefix("scan_")?.split('_').next()?.parse().ok()?;
+                e.path().is_dir().then_some((id, e.path()))
+            })
+            .collect();
+        scan_dirs.sort();
+        self.scans = scan_dirs.iter().map(|s| s.0).collect();
+        // Each scan's account of its frames (the merger's scan_report.json), in report.json too.
+        for (_, dir) in &scan_dirs {
+            if let Some(v) =
+                std::fs::read(dir.join("scan_report.json")).ok().and_then(|b| serde_json::from_slice(&b).ok())
+            {
+                self.scan_reports.push(v);
+            }
+        }
+        if let [(_, dir)] = scan_dirs.as_slice() {
+            for e in std::fs::read_dir(dir)?.filter_map(|e| e.ok()) {
+                std::fs::rename(e.path(), out.join(e.file_name()))?;
+            }
+            std::fs::remove_dir(dir)?;
+        }
+        self.files = list_files(out, out);
+        self.files.push("report.json".into());
+        self.peak_rss_bytes = peak_rss_bytes();
+        let json = serde_json::to_string_pretty(&self)?;
+        xsurf_formats::write_bytes_atomic(&out.join("report.json"), json.as_bytes())?;
+        Ok(())
     }
-    stage.insert("decode".into(), read_s);
+}
+
+/// Runs the reconstruction and writes the files and `report.json`: the bag's topics checked,
+/// the output folder cleared of an earlier reconstruction, the graph built, the bag replayed
+/// through it, the figures collected and the files put in place.
+pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
+    let t_start = Instant::now();
+    let bag = Bag::open(&opts.bag)?;
+    if bag.indexed.is_some() {
+        log::warn!(
+            "{}: no metadata.yaml; read from its storage files (`xsurf bag reindex {}` writes one)",
+            opts.bag.display(),
+            opts.bag.display()
+        );
+    }
+    let topics = BagTopics::inspect(&bag, &opts.bag)?;
+    if opts.out.as_os_str().is_empty() {
+        bail!("--out: an empty path; name the folder the reconstruction is written to");
+    }
+    std::fs::create_dir_all(&opts.out).with_context(|| format!("cannot create {}", opts.out.display()))?;
+    clear_outputs(&opts.out, &topics.cameras)?;
+    let ros = ros_args(opts)?;
+    let (mut router, xray_error) = build_graph(&topics, &ros, opts)?;
+    let mut replay = Replay::new(&mut router, topics.implicit_scan());
+    let mut report = Report::start(opts, &topics, &bag, &replay);
+    replay.run(&bag, opts, &mut report);
+    let (images, read_s) = (replay.images, replay.read_s);
+    report.collect(&router, topics.implicit_scan(), xray_error);
+    report.timings_s.insert("decode".into(), read_s);
     let total = t_start.elapsed().as_secs_f64();
-    stage.insert("total".into(), total);
-    report.timings_s = stage;
+    report.timings_s.insert("total".into(), total);
     report.frames_per_second = images as f64 / total.max(1e-9);
-
-    // One scan: its files go straight into DIR.
-    let mut scan_dirs: Vec<(u32, PathBuf)> = std::fs::read_dir(&opts.out)?
-        .filter_map(|e| e.ok())
-        .filter_map(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            let id = name.strip_prefix("scan_")?.split('_').next()?.parse().ok()?;
-            e.path().is_dir().then_some((id, e.path()))
-        })
-        .collect();
-    scan_dirs.sort();
-    report.scans = scan_dirs.iter().map(|s| s.0).collect();
-    // Each scan's account of its frames (the merger's scan_report.json), in report.json too.
-    for (_, dir) in &scan_dirs {
-        if let Some(v) = std::fs::read(dir.join("scan_report.json")).ok().and_then(|b| serde_json::from_slice(&b).ok())
-        {
-            report.scan_reports.push(v);
-        }
-    }
-    if scan_dirs.len() == 1 {
-        let dir = &scan_dirs[0].1;
-        for e in std::fs::read_dir(dir)?.filter_map(|e| e.ok()) {
-            std::fs::rename(e.path(), opts.out.join(e.file_name()))?;
-        }
-        std::fs::remove_dir(dir)?;
-    }
-    report.files = list_files(&opts.out, &opts.out);
-    report.files.push("report.json".into());
-    report.peak_rss_bytes = peak_rss_bytes();
-    let json = serde_json::to_string_pretty(&report)?;
-    xsurf_formats::write_bytes_atomic(&opts.out.join("report.json"), json.as_bytes())?;
+    report.finish_files(&opts.out)?;
     Ok(report)
 }
 

@@ -18,9 +18,22 @@ pub struct NodeType {
     pub declarations: fn() -> Vec<ParamDecl>,
     /// Its component from resolved parameters.
     pub build: fn(&Params) -> Result<Box<dyn Component>, ParamError>,
+    /// Where it sits in the graph.
+    pub role: Role,
     /// How often a live host ticks it when it asks for nothing sooner, ms (sources keep time on
     /// their own clocks; the processing nodes need only slow ticks).
     pub tick_period_ms: u64,
+}
+
+/// Where a node type sits in the graph.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// A source of the scanner's data (a camera, the C-arm): a bag replaces it offline.
+    Source,
+    /// One per camera, in the camera's namespace: the chain from images to a camera's surface.
+    PerCamera,
+    /// One for the scanner, taking every camera's results.
+    Scanner,
 }
 
 /// Every node type, in pipeline order (the list in `lib.rs`, one name per node).

@@ -803,9 +803,13 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     log::info!("shutting down");
     stop.store(true, Ordering::SeqCst);
     let d = dropped.load(Ordering::Relaxed) + graph.dropped();
+    let overflowed = graph.overflowed();
     let nodes = graph.finish();
     if d > 0 {
         log::warn!("{d} camera message(s) dropped while a node was busy");
+    }
+    if overflowed > 0 {
+        log::error!("{overflowed} message(s) dropped because a node's inbox stayed full");
     }
     // The last outputs leave through the publisher threads before the count.
     publishers.join();

@@ -8,8 +8,11 @@
 //!
 //! Delivery: one FIFO inbox per node, so every topic keeps its order. Camera streams (sensor QoS)
 //! are best effort here as over DDS: a node that already has [`SENSOR_BACKLOG`] of them waiting
-//! drops the next one and counts it. Other messages always queue (they are small and rare next to
-//! the frames: lines, profiles, clouds at a few hertz, events).
+//! drops the next one and counts it. Other messages queue (they are small and rare next to the
+//! frames: lines, profiles, clouds at a few hertz, events), up to [`INBOX_CAPACITY`] a node; a
+//! publisher facing a full inbox waits up to [`INBOX_WAIT`] for it to drain, then drops the
+//! message, counts it and logs it, so that one stuck node can neither grow without bound nor
+//! stall the graph.
 //!
 //! Offline (a bag, `xsurf reconstruct`) the single-threaded [`crate::router::Router`] runs the same
 //! components deterministically.
@@ -19,13 +22,19 @@ use crate::params::Params;
 use crate::router::{Placed, Router};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
-use std::sync::mpsc::{channel, sync_channel, Receiver, RecvTimeoutError, Sender, SyncSender};
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 /// Camera-stream messages a node may have waiting before the next one is dropped.
 pub const SENSOR_BACKLOG: usize = 4;
+
+/// Messages of any kind a node's inbox holds (at 100 Hz of `/tf`, a node can fall 40 s behind).
+pub const INBOX_CAPACITY: usize = 4096;
+
+/// How long a publisher waits for a full inbox before the message is dropped.
+pub const INBOX_WAIT: Duration = Duration::from_secs(2);
 
 /// The nice value of the threads of bulk nodes ([`crate::component::Component::bulk`]) and of
 /// their publishers.
@@ -64,11 +73,45 @@ enum Work {
 
 /// A node's inbox.
 struct Inbox {
-    tx: Sender<Work>,
+    tx: SyncSender<Work>,
     /// Camera-stream messages waiting.
     sensor_waiting: AtomicUsize,
     /// Camera-stream messages dropped because the node was behind.
     dropped: AtomicU64,
+    /// Other messages dropped because the inbox stayed full for [`INBOX_WAIT`].
+    overflowed: AtomicU64,
+}
+
+impl Inbox {
+    /// Queues `w`, waiting up to [`INBOX_WAIT`] while the inbox is full.
+    fn offer(&self, mut w: Work) -> Offer {
+        let deadline = Instant::now() + INBOX_WAIT;
+        loop {
+            match self.tx.try_send(w) {
+                Ok(()) => return Offer::Queued,
+                Err(TrySendError::Disconnected(_)) => return Offer::Gone,
+                Err(TrySendError::Full(back)) if Instant::now() < deadline => {
+                    w = back;
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+                Err(TrySendError::Full(_)) => {
+                    self.overflowed.fetch_add(1, Ordering::Relaxed);
+                    return Offer::Dropped;
+                }
+            }
+        }
+    }
+}
+
+/// What became of a message offered to an inbox.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Offer {
+    /// Queued.
+    Queued,
+    /// Dropped: the inbox stayed full for [`INBOX_WAIT`] (counted).
+    Dropped,
+    /// The node's thread has left (after shutdown).
+    Gone,
 }
 
 /// One subscription: node, its input, and whether the topic is a camera stream.
@@ -102,7 +145,13 @@ impl Fabric {
                 continue;
             }
             // A node whose thread has left (after shutdown) simply gets nothing more.
-            let _ = inbox.tx.send(Work::Input(input, msg.clone(), sensor));
+            let offer = inbox.offer(Work::Input(input, msg.clone(), sensor));
+            if offer != Offer::Queued && sensor {
+                inbox.sensor_waiting.fetch_sub(1, Ordering::AcqRel);
+            }
+            if offer == Offer::Dropped {
+                log::error!("{topic}: a node's inbox stayed full for {INBOX_WAIT:?}; the message is dropped");
+            }
         }
     }
 }
@@ -234,10 +283,15 @@ impl Threads {
                 subs.entry(topic.clone()).or_default().push(Sub { node, input, sensor: port.qos == QosClass::Sensor });
             }
         }
-        let (txs, rxs): (Vec<_>, Vec<_>) = nodes.iter().map(|_| channel::<Work>()).unzip();
+        let (txs, rxs): (Vec<_>, Vec<_>) = nodes.iter().map(|_| sync_channel::<Work>(INBOX_CAPACITY)).unzip();
         let inboxes = txs
             .into_iter()
-            .map(|tx| Inbox { tx, sensor_waiting: AtomicUsize::new(0), dropped: AtomicU64::new(0) })
+            .map(|tx| Inbox {
+                tx,
+                sensor_waiting: AtomicUsize::new(0),
+                dropped: AtomicU64::new(0),
+                overflowed: AtomicU64::new(0),
+            })
             .collect();
         let fabric = Fabric { inboxes: Arc::new(inboxes), subs: Arc::new(subs), tap };
         let mut threads = Vec::new();
@@ -263,7 +317,8 @@ impl Threads {
     /// The simulated clock, to every node.
     pub fn clock(&self, now_ns: i64) {
         for inbox in self.fabric.inboxes.iter() {
-            let _ = inbox.tx.send(Work::Clock(now_ns));
+            // A full inbox drops a clock message: the next one supersedes it.
+            let _ = inbox.tx.try_send(Work::Clock(now_ns));
         }
     }
 
@@ -285,6 +340,11 @@ impl Threads {
     /// Camera-stream messages dropped so far because a node was behind.
     pub fn dropped(&self) -> u64 {
         self.fabric.inboxes.iter().map(|i| i.dropped.load(Ordering::Relaxed)).sum()
+    }
+
+    /// Other messages dropped so far because a node's inbox stayed full for [`INBOX_WAIT`].
+    pub fn overflowed(&self) -> u64 {
+        self.fabric.inboxes.iter().map(|i| i.overflowed.load(Ordering::Relaxed)).sum()
     }
 
     /// Tells every node, in the order they were added, that no more input is coming (each
@@ -539,5 +599,60 @@ mod tests {
         let handled = seen.lock().unwrap().iter().filter(|(o, _)| o == "/a2").count() as u64;
         assert!(dropped > 0, "a 1 ms source into a 20 ms node must drop");
         assert!(handled <= 200 / 20 + SENSOR_BACKLOG as u64 + 2, "{handled} handled: the backlog is bounded");
+    }
+
+    /// A node stuck on its first message (a merge that takes seconds).
+    struct Stuck {
+        handled: Arc<AtomicU64>,
+    }
+    impl Component for Stuck {
+        fn node_name(&self) -> &'static str {
+            "stuck"
+        }
+        fn inputs(&self) -> Vec<Port> {
+            vec![Port::new("/x", Image::TYPE_NAME, QosClass::Reliable)]
+        }
+        fn outputs(&self) -> Vec<Port> {
+            Vec::new()
+        }
+        fn declarations(&self) -> Vec<ParamDecl> {
+            Vec::new()
+        }
+        fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
+            Ok(())
+        }
+        fn handle(&mut self, _: usize, _: &Msg, _: &mut Outbox) -> Result<(), NodeError> {
+            if self.handled.fetch_add(1, Ordering::SeqCst) == 0 {
+                std::thread::sleep(INBOX_WAIT + Duration::from_secs(1));
+            }
+            Ok(())
+        }
+    }
+
+    /// A node's inbox is bounded: a publisher waits for a full one up to INBOX_WAIT, then the
+    /// message is dropped and counted; everything queued is still handled.
+    #[test]
+    fn a_full_inbox_waits_then_drops_and_counts() {
+        let mut r = Router::new();
+        let handled = Arc::new(AtomicU64::new(0));
+        r.add(Box::new(Stuck { handled: handled.clone() }), "stuck", "/", &[]);
+        let tap: SharedTap = Arc::new(|_: &str, _: &Msg| {});
+        let g = Threads::start(r, tap, &[Duration::from_millis(50)], false).unwrap();
+        let msg = frame(1);
+        g.publish("/x", &msg);
+        while handled.load(Ordering::SeqCst) == 0 {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        // The node is stuck on the first: the inbox takes INBOX_CAPACITY more, then one waits.
+        for _ in 0..INBOX_CAPACITY {
+            g.publish("/x", &msg);
+        }
+        assert_eq!(g.overflowed(), 0);
+        let t0 = Instant::now();
+        g.publish("/x", &msg);
+        assert!(t0.elapsed() >= INBOX_WAIT, "the publisher waited {:?}", t0.elapsed());
+        assert_eq!(g.overflowed(), 1);
+        g.finish();
+        assert_eq!(handled.load(Ordering::SeqCst), 1 + INBOX_CAPACITY as u64);
     }
 }

@@ -27,6 +27,7 @@ pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
     name: "c_arm_pose",
     declarations: <CArmPoseParams as xsurf_runtime::params::NodeParams>::declarations,
     build: |p| Ok(Box::new(CArmPoseNode::new(p)?)),
+    role: crate::registry::Role::Source,
     tick_period_ms: 2,
 };
 

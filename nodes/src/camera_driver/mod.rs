@@ -15,6 +15,7 @@ pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
     name: "camera_driver",
     declarations: <CameraDriverParams as xsurf_runtime::params::NodeParams>::declarations,
     build: |p| Ok(Box::new(CameraDriverNode::new(p)?)),
+    role: crate::registry::Role::Source,
     tick_period_ms: 2,
 };
 

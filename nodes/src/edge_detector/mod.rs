@@ -8,6 +8,7 @@ pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
     name: "edge_detector",
     declarations: <EdgeParams as xsurf_runtime::params::NodeParams>::declarations,
     build: |p| Ok(Box::new(EdgeDetectorNode::new(p)?)),
+    role: crate::registry::Role::PerCamera,
     tick_period_ms: 50,
 };
 

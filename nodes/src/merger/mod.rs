@@ -29,6 +29,7 @@ pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
     name: "merger",
     declarations: <MergerParams as xsurf_runtime::params::NodeParams>::declarations,
     build: |p| Ok(Box::new(MergerNode::new(p)?)),
+    role: crate::registry::Role::Scanner,
     tick_period_ms: 50,
 };
 

@@ -15,6 +15,7 @@ pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
     name: "mesher",
     declarations: <MesherParams as xsurf_runtime::params::NodeParams>::declarations,
     build: |p| Ok(Box::new(MesherNode::new(p)?)),
+    role: crate::registry::Role::PerCamera,
     tick_period_ms: 50,
 };
 

@@ -11,6 +11,7 @@ pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
     name: "triangulator",
     declarations: <TriangulatorParams as xsurf_runtime::params::NodeParams>::declarations,
     build: |p| Ok(Box::new(TriangulatorNode::new(p)?)),
+    role: crate::registry::Role::PerCamera,
     tick_period_ms: 50,
 };
 

@@ -21,6 +21,7 @@ pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
     name: "xray_aligner",
     declarations: <XrayAlignerParams as xsurf_runtime::params::NodeParams>::declarations,
     build: |p| Ok(Box::new(XrayAlignerNode::new(p)?)),
+    role: crate::registry::Role::Scanner,
     tick_period_ms: 50,
 };
 
