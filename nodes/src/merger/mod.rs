@@ -64,6 +64,8 @@ struct Config {
     transparency: f32,
     output_dir: Option<PathBuf>,
     frame_id: String,
+    table_frame: String,
+    carm_frame: String,
     republish_ns: Option<i64>,
 }
 
@@ -105,6 +107,8 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         transparency: p.transparency,
         output_dir: p.output_dir,
         frame_id: p.frame_id,
+        table_frame: p.table_frame,
+        carm_frame: p.carm_frame,
         republish_ns: (p.republish_s > 0.0).then_some((p.republish_s * 1e9) as i64),
     })
 }
@@ -155,8 +159,10 @@ pub struct MergerNode {
 impl MergerNode {
     /// Builds the node from its parameters.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
+        let cfg = config(p)?;
         Ok(Self {
-            cfg: config(p)?,
+            statics: TfBuffer::new(&cfg.table_frame, &cfg.carm_frame, 0),
+            cfg,
             clouds: BTreeMap::new(),
             camera_sizes: BTreeMap::new(),
             scan_start_ns: None,
@@ -178,7 +184,6 @@ impl MergerNode {
             refinements: 0,
             refinements_refused: 0,
             seam_triangles: 0,
-            statics: TfBuffer::new("table", "carm", 0),
             motion: None,
             last_outputs: crate::republish::Republisher::default(),
         })
@@ -223,7 +228,7 @@ impl MergerNode {
             let placements = TFMessage {
                 transforms: refined
                     .iter()
-                    .map(|(name, e)| convert::transform_stamped(stamp, "carm", &format!("{name}_optical_frame"), e))
+                    .map(|(name, e)| convert::transform_stamped(stamp, &self.cfg.carm_frame, &format!("{name}_optical_frame"), e))
                     .collect(),
             };
             out.publish(OUT_PLACEMENTS, Msg::Tf(Arc::new(placements)));
@@ -603,6 +608,9 @@ impl Component for MergerNode {
         if c.cameras != self.cfg.cameras {
             return Err(Params::invalid("cameras", "cannot change while running (restart the node)"));
         }
+        if (&c.table_frame, &c.carm_frame) != (&self.cfg.table_frame, &self.cfg.carm_frame) {
+            return Err(Params::invalid("carm_frame", "the frames cannot change while running (restart the node)"));
+        }
         self.cfg = c;
         Ok(())
     }
@@ -671,8 +679,8 @@ impl Component for MergerNode {
             (Input::Overlay, Msg::Marker(m)) => self.overlay(m),
             (Input::Tf, Msg::Tf(t)) => {
                 for t in t.transforms.iter().filter(|t| {
-                    t.header.frame_id.trim_start_matches('/') == self.cfg.frame_id
-                        && t.child_frame_id.trim_start_matches('/') == "carm"
+                    t.header.frame_id.trim_start_matches('/') == self.cfg.table_frame
+                        && t.child_frame_id.trim_start_matches('/') == self.cfg.carm_frame
                 }) {
                     let pose = convert::rigid(t).map_err(NodeError::new)?;
                     self.motion = Some(self.motion.map_or(CarmMotion::start(pose), |m| m.then(pose)));

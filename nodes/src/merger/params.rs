@@ -48,6 +48,11 @@ xsurf_runtime::parameters! {
         output_dir: Option<PathBuf> = None;
         /// frame of the merged cloud and mesh
         frame_id: String = "table".into();
+        /// the fixed frame of `table -> carm` on /tf (the C-arm's motion over a scan)
+        table_frame: String = "table".into();
+        /// the C-arm frame: of /tf, of the cameras' placements on /tf_static and of those the
+        /// refinement publishes on /surface/placements
+        carm_frame: String = "carm".into();
         /// the merged cloud and mesh are published again this often until the next scan, for
         /// viewers that join late or lose them (best effort) (0: once)
         republish_s: f64 = 2.0, unit "s", range 0.0..=3600.0;
