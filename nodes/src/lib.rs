@@ -4,11 +4,11 @@
 //! ([`camera_driver`], [`c_arm_pose`], [`edge_detector`], [`triangulator`], [`mesher`],
 //! [`merger`], [`xray_aligner`]) listed in the [`registry`], the conversions
 //! between messages and the algorithms ([`convert`]), the scanner's tf view ([`tf`]), the
-//! synthetic scan writer ([`synth`]), the calibration commands ([`calibrate`]), offline reconstruction from a bag ([`offline`]) and the
+//! synthetic scan writer ([`synth`]), the `xsurf` command and its calibration commands ([`cli`]), offline reconstruction from a bag ([`offline`]) and the
 //! launcher of ROS 2 YAML launch files ([`launch`]).
 #![deny(missing_docs)]
 
-pub mod calibrate;
+pub mod cli;
 pub mod convert;
 pub mod host;
 pub mod launch;

@@ -13,7 +13,7 @@
 //! Each command prints its numbers, writes a report (`report.json` and PNG plots; by default in
 //! `<output>_<command>_report/`) and explains every image it could not use.
 
-use crate::UsageError;
+use super::args::{list, usage, Args, Syntax};
 use anyhow::{anyhow, bail, Context};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -33,10 +33,6 @@ use xsurf_formats::calibration::{self, CameraCalibration};
 use xsurf_formats::plot::{palette, Plot, BLUE, GREY, RED};
 use xsurf_formats::write_bytes_atomic;
 
-fn usage(msg: impl Into<String>) -> anyhow::Error {
-    anyhow!(UsageError(msg.into()))
-}
-
 /// Travels at which the synthetic set images the board on the tabletop, metres.
 pub const SYNTH_TRAVELS: [f64; 3] = [-0.03, 0.0, 0.03];
 /// Tabletop heights of the synthetic laser set, metres.
@@ -53,70 +49,45 @@ struct Group {
     images: Vec<PathBuf>,
 }
 
-/// Options: `--name value` pairs, and groups opened by `--camera`.
-#[derive(Debug, Default)]
+/// A calibrate command's options (the shared parser), with the groups opened by `--camera`
+/// read into [`Group`]s.
+#[derive(Debug)]
 struct Opts {
-    single: Vec<(String, String)>,
+    args: Args,
     positional: Vec<PathBuf>,
     groups: Vec<Group>,
 }
 
 impl Opts {
+    /// `valued` options; in a `--camera` group, `--intrinsics` and `values_flag` (a list).
     fn parse(args: &[String], valued: &[&str], values_flag: Option<&str>) -> anyhow::Result<Opts> {
-        let mut o = Opts::default();
-        let mut i = 0;
-        while i < args.len() {
-            let a = args[i].as_str();
-            let value = || args.get(i + 1).cloned().ok_or_else(|| usage(format!("{a} needs a value")));
-            match a {
-                "--camera" => o.groups.push(Group { camera: value()?, ..Group::default() }),
-                "--intrinsics" | "--travels" | "--heights" => {
-                    let v = value()?;
-                    let g = o.groups.last_mut().ok_or_else(|| usage(format!("{a} belongs after --camera NAME")))?;
-                    if a == "--intrinsics" {
-                        g.intrinsics = Some(PathBuf::from(v));
-                    } else if Some(a) == values_flag {
-                        g.values = list(a, &v)?;
-                    } else {
-                        return Err(usage(format!("unknown option {a}")));
-                    }
-                }
-                _ if valued.contains(&a) => o.single.push((a.to_string(), value()?)),
-                _ if a.starts_with('-') && a.len() > 1 => return Err(usage(format!("unknown option {a}"))),
-                _ => {
-                    match o.groups.last_mut() {
-                        Some(g) => g.images.push(PathBuf::from(a)),
-                        None => o.positional.push(PathBuf::from(a)),
-                    }
-                    i += 1;
-                    continue;
-                }
-            }
-            i += 2;
+        let inner: Vec<&str> = std::iter::once("--intrinsics").chain(values_flag).collect();
+        let a = Args::parse(args, &Syntax { flags: &[], valued, group: Some(("--camera", &inner)) })?;
+        let mut groups = Vec::new();
+        for g in &a.groups {
+            groups.push(Group {
+                camera: g.name.clone(),
+                intrinsics: g.get("--intrinsics").map(PathBuf::from),
+                values: match values_flag.and_then(|f| g.get(f).map(|v| (f, v))) {
+                    Some((f, v)) => list(f, v)?,
+                    None => Vec::new(),
+                },
+                images: g.positional.iter().map(PathBuf::from).collect(),
+            });
         }
-        Ok(o)
+        Ok(Opts { positional: a.positional.iter().map(PathBuf::from).collect(), groups, args: a })
     }
     fn get(&self, name: &str) -> Option<&str> {
-        self.single.iter().rev().find(|(k, _)| k == name).map(|(_, v)| v.as_str())
+        self.args.get(name)
     }
     fn need(&self, name: &str) -> anyhow::Result<&str> {
-        self.get(name).ok_or_else(|| usage(format!("{name} is required")))
+        self.args.need(name)
     }
     fn num(&self, name: &str, default: f64) -> anyhow::Result<f64> {
-        match self.get(name) {
-            None => Ok(default),
-            Some(v) => match v.parse::<f64>() {
-                Ok(x) if x.is_finite() => Ok(x),
-                Ok(_) => Err(usage(format!("{name}: {v:?} is not a finite number"))),
-                Err(_) => Err(usage(format!("{name}: {v:?} is not a number"))),
-            },
-        }
+        self.args.num(name, default)
     }
     fn whole(&self, name: &str, default: u64) -> anyhow::Result<u64> {
-        match self.get(name) {
-            None => Ok(default),
-            Some(v) => v.parse::<u64>().map_err(|_| usage(format!("{name}: {v:?} is not a whole number, 0 or more"))),
-        }
+        self.args.num(name, default)
     }
     fn board(&self) -> anyhow::Result<BoardSpec> {
         let square = self.need("--square")?;
@@ -145,17 +116,6 @@ fn output_file(p: &str) -> anyhow::Result<PathBuf> {
         }
     }
     Ok(path)
-}
-
-/// A comma-separated list of finite numbers (NaN and infinities are refused by name).
-fn list(name: &str, v: &str) -> anyhow::Result<Vec<f64>> {
-    v.split(',')
-        .map(|s| match s.trim().parse::<f64>() {
-            Ok(x) if x.is_finite() => Ok(x),
-            Ok(_) => Err(usage(format!("{name}: {s:?} in {v:?} is not a finite number"))),
-            Err(_) => Err(usage(format!("{name}: {s:?} in {v:?} is not a number"))),
-        })
-        .collect()
 }
 
 /// Runs `xsurf calibrate ARGS`.
