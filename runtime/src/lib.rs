@@ -8,6 +8,7 @@
 
 pub mod component;
 pub mod dds;
+pub mod harness;
 pub mod logging;
 pub mod params;
 pub mod rosargs;

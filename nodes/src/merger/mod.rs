@@ -797,4 +797,59 @@ mod tests {
         let bad = CameraInfo { width: 64, height: 0, ..Default::default() };
         assert!(m.handle(n + 5, &Msg::CameraInfo(Arc::new(bad)), &mut out).is_err());
     }
+
+    /// Two cameras that see the same flat patch 0.3 mm apart (inside fuse_distance_m): after
+    /// END and merge_delay_s, one layer is published on /surface/cloud and /surface/mesh,
+    /// about one camera's points, not both; a camera 5 mm off (beyond it) stays a layer of its
+    /// own.
+    #[test]
+    fn overlapping_cameras_merge_into_one_layer_after_the_delay() {
+        use xsurf_core::triangulate::Profile;
+        use xsurf_runtime::harness::Harness;
+        let (samples, frames) = (30, 20);
+        let cloud = |dz: f32, sec: i32| {
+            let mut g = Grid::new(samples);
+            for f in 0..frames {
+                let p = Profile {
+                    points: (0..samples).map(|s| [0.002 * s as f32, 0.002 * f as f32, 0.02 + dz]).collect(),
+                    intensity: vec![50.0; samples],
+                    rgb: None,
+                    range: vec![0.5; samples],
+                    outside_volume: 0,
+                };
+                g.push(i64::from(sec) * 1_000_000_000 + f as i64, &p).unwrap();
+            }
+            let mut h = xsurf_msgs::std_msgs::Header::default();
+            h.stamp.sec = sec;
+            Msg::Cloud(Arc::new(convert::grid_cloud(&g, h)))
+        };
+        let event = |event, sec| {
+            let mut e = ScanEvent { scan_id: 3, event, ..Default::default() };
+            e.header.stamp.sec = sec;
+            Msg::ScanEvent(Arc::new(e))
+        };
+        let merged_points = |dz: f32| {
+            let mut o = BTreeMap::new();
+            o.insert("refine".to_string(), xsurf_runtime::params::ParamValue::Bool(false));
+            let params = Params::resolve(&MergerParams::declarations(), &o).unwrap();
+            let mut h = Harness::new(Box::new(MergerNode::new(&params).unwrap()), "merger", "/");
+            h.feed("/scan/events", &event(ScanEvent::START, 10))
+                .feed("/cam1/cloud", &cloud(0.0, 11))
+                .feed("/cam2/cloud", &cloud(dz, 11))
+                .feed("/scan/events", &event(ScanEvent::END, 12));
+            h.tick(12_500_000_000);
+            assert!(h.take("/surface/cloud").is_empty(), "the merge waits merge_delay_s (1 s) after END");
+            h.tick(13_100_000_000);
+            let clouds = h.take("/surface/cloud");
+            assert_eq!((clouds.len(), h.take("/surface/mesh").len(), h.errors()), (1, 1, 0), "{:?}", h.last_error());
+            assert_eq!(h.counter("merges"), Some(1));
+            let Msg::Cloud(c) = &clouds[0] else { panic!("a PointCloud2") };
+            (c.width * c.height) as usize
+        };
+        let one = samples * frames;
+        let fused = merged_points(0.0003);
+        assert!(fused >= one * 9 / 10 && fused <= one * 11 / 10, "one layer: {fused} points of {one} a camera");
+        let apart = merged_points(0.005);
+        assert!(apart >= 2 * one * 9 / 10, "two layers 5 mm apart stay two: {apart}");
+    }
 }

@@ -368,4 +368,82 @@ mod tests {
             n.last_error
         );
     }
+
+    /// A line the camera saw of points on the laser plane is placed at those points in
+    /// `table`: camera_info, the camera's placement on /tf_static and the C-arm's travel on /tf
+    /// (interpolated at the image's stamp) all enter. The samples are the points projected
+    /// through the rig's camera model (distortion included); placing them back undoes it.
+    #[test]
+    fn a_line_is_placed_where_the_camera_saw_it() {
+        use xsurf_core::geom::Vec3;
+        use xsurf_runtime::harness::Harness;
+        let rig = xsurf_core::rig::Rig::study(64, 48);
+        let cam = rig.camera("cam1").unwrap();
+        let model = cam.model().unwrap();
+        let carm_from_optical = cam.carm_from_optical();
+        let (t0, t1, t_image) = (1_000_000_000i64, 1_100_000_000i64, 1_040_000_000i64);
+        let (travel0, travel1) = (0.05, 0.057);
+        let travel = travel0 + (travel1 - travel0) * 0.4;
+        let table_from_carm = xsurf_core::pose::table_from_carm(travel, 0.0, 0.0);
+        // A bumpy profile across the table in the laser plane (y = 0 of carm).
+        let mut line = LaserLine {
+            image_width: 64,
+            image_height: 48,
+            orientation: LaserLine::ORIENTATION_VERTICAL,
+            u: vec![f32::NAN; 48],
+            v: vec![f32::NAN; 48],
+            strength: vec![0.0; 48],
+            width: vec![0.0; 48],
+            ..LaserLine::default()
+        };
+        let mut truth = vec![None; 48];
+        for k in 0..4000 {
+            let x = -0.3 + 0.6 * f64::from(k) / 4000.0;
+            let p = Vec3::new(x, 0.0, 0.05 + 0.04 * (x * 12.0).sin());
+            let Some((u, v)) = model.project(carm_from_optical.inverse().transform_point(p)) else { continue };
+            let row = v.round();
+            if !(0.0..64.0).contains(&u) || !(0.0..48.0).contains(&row) || truth[row as usize].is_some() {
+                continue;
+            }
+            let r = row as usize;
+            (line.u[r], line.v[r], line.strength[r], line.width[r]) = (u as f32, v as f32, 60.0, 3.0);
+            truth[r] = Some(table_from_carm.transform_point(p));
+        }
+        let seen = truth.iter().flatten().count();
+        assert!(seen > 30, "the profile crosses the image: {seen} rows");
+        line.header = convert::header(t_image, "cam1_optical_frame");
+
+        let params = Params::resolve(&TriangulatorParams::declarations(), &BTreeMap::new()).unwrap();
+        let mut h = Harness::new(Box::new(TriangulatorNode::new(&params).unwrap()), "triangulator", "/cam1");
+        let info = convert::camera_info(&model, convert::header(t_image, "cam1_optical_frame"));
+        let pose = |t, travel| {
+            let e = xsurf_core::pose::table_from_carm(travel, 0.0, 0.0);
+            Msg::Tf(Arc::new(TFMessage { transforms: vec![convert::transform_stamped(t, "table", "carm", &e)] }))
+        };
+        let statics = TFMessage {
+            transforms: vec![convert::transform_stamped(0, "carm", "cam1_optical_frame", &carm_from_optical)],
+        };
+        h.feed("/cam1/camera_info", &Msg::CameraInfo(Arc::new(info)))
+            .feed("/tf_static", &Msg::Tf(Arc::new(statics)))
+            .feed("/tf", &pose(t0, travel0))
+            .feed("/cam1/laser_line", &Msg::LaserLine(Arc::new(line)));
+        assert!(h.take("/cam1/profile").is_empty(), "the line waits for a pose after its stamp");
+        h.feed("/tf", &pose(t1, travel1));
+        let out = h.take("/cam1/profile");
+        assert_eq!((out.len(), h.errors()), (1, 0), "{:?}", h.last_error());
+        let Msg::Cloud(cloud) = &out[0] else { panic!("a profile is a PointCloud2") };
+        assert_eq!(cloud.header.frame_id, "table");
+        let profile = convert::cloud_profile(cloud).unwrap();
+        assert_eq!(profile.valid(), seen);
+        for (p, t) in profile.points.iter().zip(&truth) {
+            match t {
+                Some(t) => {
+                    let d = Vec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])) - *t;
+                    assert!(d.norm() < 2e-5, "{p:?} against {t:?}: {:.3} mm", d.norm() * 1e3);
+                }
+                None => assert!(p[0].is_nan()),
+            }
+        }
+        assert_eq!(h.counter("points"), Some(seen as u64));
+    }
 }
