@@ -373,11 +373,11 @@ fn spawn(label: &str, mut cmd: Command) -> anyhow::Result<Running> {
     .flatten()
     {
         let label = label.to_string();
-        std::thread::spawn(move || {
+        std::thread::Builder::new().name(format!("output {label}")).spawn(move || {
             for line in std::io::BufReader::new(pipe).lines().map_while(Result::ok) {
                 eprintln!("[{label}] {line}");
             }
-        });
+        })?;
     }
     eprintln!("[launch] started {label} (pid {})", child.id());
     Ok(Running {

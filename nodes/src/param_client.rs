@@ -89,10 +89,10 @@ pub fn run(args: &[String]) -> anyhow::Result<()> {
         )
         .map_err(|e| anyhow!("node: {e:?}"))?;
     let spinner = node.spinner().map_err(|e| anyhow!("spinner: {e:?}"))?;
-    std::thread::spawn(move || futures::executor::block_on(spinner.spin()));
+    std::thread::Builder::new().name("spinner".into()).spawn(move || futures::executor::block_on(spinner.spin()))?;
     let target = node_name.to_string();
     let (domain, scope) = (env.domain_id, if env.localhost_only { "localhost only" } else { "all interfaces" });
-    std::thread::spawn(move || {
+    std::thread::Builder::new().name("waiting note".into()).spawn(move || {
         std::thread::sleep(QUIET.min(timeout));
         if timeout > QUIET {
             eprintln!(
@@ -107,7 +107,7 @@ pub fn run(args: &[String]) -> anyhow::Result<()> {
             timeout.as_secs_f64()
         );
         std::process::exit(1);
-    });
+    })?;
     match (verb, rest) {
         ("list", []) => {
             let c = client::<ListParametersRequest, ListParametersResponse>(

@@ -21,7 +21,7 @@ use ros2_client::qos::{Durability, History, QosProfile, Reliability, WhenFull};
 use ros2_client::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions, ParameterValue as RosValue};
 use std::net::Ipv4Addr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc::{sync_channel, RecvTimeoutError, SyncSender, TrySendError};
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use xsurf_msgs::{
@@ -368,15 +368,18 @@ pub fn subscribe_forward(
     let dropped = Arc::new(AtomicU64::new(0));
     let feed = Feed { tx: etx, dropped: dropped.clone(), stop };
     subscribe(node.node(), topic, type_name_full, qos(class), class == QosClass::Sensor, index, feed, Arc::default())?;
-    std::thread::spawn(move || {
-        while let Ok(ev) = erx.recv() {
-            if let Event::Message(i, m) = ev {
-                if tx.send((i, m)).is_err() {
-                    break;
+    std::thread::Builder::new()
+        .name(format!("sub {topic}"))
+        .spawn(move || {
+            while let Ok(ev) = erx.recv() {
+                if let Event::Message(i, m) = ev {
+                    if tx.send((i, m)).is_err() {
+                        break;
+                    }
                 }
             }
-        }
-    });
+        })
+        .map_err(|e| HostError::Dds(format!("thread: {e}")))?;
     Ok(dropped)
 }
 
@@ -600,110 +603,10 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     let (tx, rx) = sync_channel::<Event>(QUEUE_DEPTH);
     let dropped = Arc::new(AtomicU64::new(0));
     let feed = Feed { tx: tx.clone(), dropped: dropped.clone(), stop: stop.clone() };
-    let mut router = crate::router::Router::new();
-    let mut dds_nodes: Vec<DdsNode> = Vec::new();
-    let mut configs: Vec<(HostConfig, Params)> = Vec::new();
-    let mut sim_time = false;
-    for (i, (cfg, component)) in nodes.into_iter().enumerate() {
-        let (ptx, prx) = sync_channel::<(String, ParamValue)>(16);
-        let dn = create_node(&ctx, &cfg, Some(ptx))?;
-        if cfg.rosout && i == 0 {
-            let h = dn.node.logging_handle();
-            let name = crate::rosargs::fq_name(&cfg.namespace, &cfg.name).trim_start_matches('/').replace('/', ".");
-            crate::logging::set_rosout(Box::new(move |level, _target, msg| {
-                use ros2_client::rosout::RosoutRaw;
-                let lvl = match level {
-                    log::Level::Error => ros2_client::log::LogLevel::Error,
-                    log::Level::Warn => ros2_client::log::LogLevel::Warn,
-                    log::Level::Info => ros2_client::log::LogLevel::Info,
-                    _ => ros2_client::log::LogLevel::Debug,
-                };
-                h.rosout_raw(ros2_client::builtin_interfaces::Time::now(), lvl, &name, msg, "", "", 0);
-            }));
-        }
-        // Parameter set actions of node i, forwarded into the loop.
-        let tx2 = tx.clone();
-        std::thread::spawn(move || {
-            while let Ok((n, v)) = prx.recv() {
-                if tx2.send(Event::Reconfigure(i, n, v)).is_err() {
-                    break;
-                }
-            }
-        });
-        sim_time |= matches!(cfg.params.get("use_sim_time"), Some(ParamValue::Bool(true)));
-        router.add(component, &cfg.name, &cfg.namespace, &cfg.remaps);
-        let params = cfg.params.clone();
-        configs.push((cfg, params));
-        dds_nodes.push(dn);
-    }
-    if dds_nodes.is_empty() {
-        return Err(HostError::Dds("no node to run".into()));
-    }
-    let qos_of = |node: usize| QosTable::from_params(&configs[node].1).map_err(HostError::Dds);
-    // Publishers for every output, on the node that produces it.
-    let mut pubs = Publishers::default();
-    let mut sensor_topics = Vec::new();
-    for (ni, n) in router.nodes().iter().enumerate() {
-        let table = qos_of(ni)?;
-        for (p, topic) in &n.outputs {
-            if !pubs.has(topic) {
-                let pb = dds_nodes[ni].make_publisher(topic, p.type_name, table.get(p.qos))?;
-                pubs.0.push((topic.clone(), pb));
-                if p.qos == QosClass::Sensor {
-                    sensor_topics.push(topic.clone());
-                }
-                log::info!("{}: publishes {topic} ({})", n.name, p.type_name);
-            }
-        }
-    }
-    // DDS subscriptions for what comes from outside the process: topics no node here publishes,
-    // and the shared ones (tf, scan events) that others may publish too.
-    let mut externals: Vec<(String, Port, Arc<Vec<ros2_client::Gid>>)> =
-        router.external_inputs().into_iter().map(|(t, p)| (t, p, Arc::default())).collect();
-    for (topic, p) in router.shared_inputs() {
-        let own: Vec<ros2_client::Gid> = pubs.0.iter().filter(|(t, _)| *t == topic).map(|(_, pb)| pb.gid()).collect();
-        externals.push((topic, p, Arc::new(own)));
-    }
-    for (k, (topic, p, ignore)) in externals.iter().enumerate() {
-        let ni = router.nodes().iter().position(|n| n.inputs.iter().any(|(_, t)| t == topic)).unwrap_or(0);
-        let table = qos_of(ni)?;
-        subscribe(
-            dds_nodes[ni].node(),
-            topic,
-            p.type_name,
-            table.get(p.qos),
-            p.qos == QosClass::Sensor,
-            k,
-            feed.clone(),
-            ignore.clone(),
-        )?;
-        log::info!("{}: subscribed {topic} ({})", router.nodes()[ni].name, p.type_name);
-    }
-    // ros2-client's spinner subscribes /clock itself, typed builtin_interfaces/Time (not
-    // rosgraph_msgs/Clock as ROS 2 has it); two types on one topic in one participant make
-    // RustDDS drop the topic. So /clock is read through a participant of its own, whose node
-    // never spins.
-    let _clock = if sim_time {
-        let cctx = env.context()?;
-        let name = NodeName::new("/", "_xsurf_clock").map_err(|e| HostError::Dds(format!("clock node: {e:?}")))?;
-        let mut cnode = cctx
-            .new_node(name, NodeOptions::new().enable_rosout(false))
-            .map_err(|e| HostError::Dds(format!("clock node: {e:?}")))?;
-        // Best effort, as rclcpp's ClockQoS: it matches reliable and best-effort publishers.
-        subscribe(
-            &mut cnode,
-            "/clock",
-            "rosgraph_msgs/msg/Clock",
-            qos(QosClass::Sensor),
-            false,
-            usize::MAX,
-            feed.clone(),
-            Arc::default(),
-        )?;
-        Some((cctx, cnode))
-    } else {
-        None
-    };
+    let Placement { router, mut dds_nodes, mut configs, sim_time } = place_nodes(&ctx, nodes, &tx)?;
+    let (pubs, sensor_topics) = make_publishers(&router, &mut dds_nodes, &configs)?;
+    let externals = subscribe_externals(&router, &mut dds_nodes, &configs, &pubs, &feed)?;
+    let _clock = if sim_time { Some(clock_subscription(env, &feed)?) } else { None };
     drop(tx);
     drop(feed);
     let pub_errors = Arc::new(AtomicU64::new(0));
@@ -725,41 +628,8 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
         .flat_map(|n| n.outputs.iter().map(|(_, t)| t.clone()))
         .collect();
     let publishers = PublishThreads::start(pubs, &sensor_topics, &bulk_topics, pub_errors.clone(), latency_log)?;
-    let tap: crate::threads::SharedTap = {
-        let pub_errors = pub_errors.clone();
-        let senders = publishers.senders.clone();
-        Arc::new(move |topic: &str, m: &Msg| {
-            let Some((_, tx, droppable)) = senders.iter().find(|(t, _, _)| t == topic) else {
-                log::error!("no publisher on {topic}");
-                return;
-            };
-            let sent = if *droppable {
-                match tx.try_send(m.clone()) {
-                    Err(TrySendError::Full(_)) => Err("its publisher is behind: dropped".to_string()),
-                    r => r.map_err(|e| e.to_string()),
-                }
-            } else {
-                tx.send(m.clone()).map_err(|e| e.to_string())
-            };
-            if let Err(e) = sent {
-                let n = pub_errors.fetch_add(1, Ordering::Relaxed) + 1;
-                if n <= 5 || n.is_power_of_two() {
-                    log::warn!("publish on {topic} failed ({n} so far): {e}");
-                }
-            }
-        })
-    };
-    for dn in &mut dds_nodes {
-        let spinner = dn.node.spinner().map_err(|e| HostError::Dds(format!("spinner: {e:?}")))?;
-        std::thread::Builder::new()
-            .name("spinner".into())
-            .spawn(move || {
-                if let Err(e) = futures::executor::block_on(spinner.spin()) {
-                    log::error!("parameter services stopped: {e:?}");
-                }
-            })
-            .map_err(|e| HostError::Dds(format!("thread: {e}")))?;
-    }
+    let tap = publish_tap(&publishers, &pub_errors);
+    start_spinners(&mut dds_nodes)?;
     {
         let stop = stop.clone();
         ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
@@ -776,12 +646,237 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
         env.domain_id,
         if env.localhost_only { "localhost only" } else { "all interfaces" }
     );
-    let mut died: Option<String> = None;
+    let died = serve(&graph, &rx, &externals, &mut configs, &stop);
+    log::info!("shutting down");
+    stop.store(true, Ordering::SeqCst);
+    let d = dropped.load(Ordering::Relaxed) + graph.dropped();
+    let overflowed = graph.overflowed();
+    let nodes = graph.finish();
+    if d > 0 {
+        log::warn!("{d} camera message(s) dropped while a node was busy");
+    }
+    if overflowed > 0 {
+        log::error!("{overflowed} message(s) dropped because a node's inbox stayed full");
+    }
+    // The last outputs leave through the publisher threads before the count.
+    publishers.join();
+    let errors = pub_errors.load(Ordering::Relaxed) + log_node_figures(&nodes, started.elapsed().as_secs_f64());
+    // Give reliable writers a moment to deliver the last output, then leave the graph.
+    std::thread::sleep(Duration::from_millis(200));
+    // Dropping a node stops its spinner (ros2-client's Drop signals it; signalling it first
+    // by hand as well filled the one-slot channel, and the Drop then logged an error).
+    drop(nodes);
+    drop(dds_nodes);
+    drop(ctx);
+    if let Some(name) = died {
+        return Err(HostError::NodeDied(name));
+    }
+    Ok(errors)
+}
+
+/// The components placed in a router, each with its DDS node (parameters, services, rosout)
+/// and its resolved parameters.
+struct Placement {
+    router: crate::router::Router,
+    dds_nodes: Vec<DdsNode>,
+    configs: Vec<(HostConfig, Params)>,
+    /// Some node takes its time from `/clock`.
+    sim_time: bool,
+}
+
+/// Creates each component's DDS node; the first node's log also goes to `/rosout`; run-time
+/// parameter sets are forwarded into the host's loop as [`Event::Reconfigure`].
+fn place_nodes(
+    ctx: &Context,
+    nodes: Vec<(HostConfig, Box<dyn Component>)>,
+    tx: &SyncSender<Event>,
+) -> Result<Placement, HostError> {
+    let mut p =
+        Placement { router: crate::router::Router::new(), dds_nodes: Vec::new(), configs: Vec::new(), sim_time: false };
+    for (i, (cfg, component)) in nodes.into_iter().enumerate() {
+        let (ptx, prx) = sync_channel::<(String, ParamValue)>(16);
+        let dn = create_node(ctx, &cfg, Some(ptx))?;
+        if cfg.rosout && i == 0 {
+            let h = dn.node.logging_handle();
+            let name = crate::rosargs::fq_name(&cfg.namespace, &cfg.name).trim_start_matches('/').replace('/', ".");
+            crate::logging::set_rosout(Box::new(move |level, _target, msg| {
+                use ros2_client::rosout::RosoutRaw;
+                let lvl = match level {
+                    log::Level::Error => ros2_client::log::LogLevel::Error,
+                    log::Level::Warn => ros2_client::log::LogLevel::Warn,
+                    log::Level::Info => ros2_client::log::LogLevel::Info,
+                    _ => ros2_client::log::LogLevel::Debug,
+                };
+                h.rosout_raw(ros2_client::builtin_interfaces::Time::now(), lvl, &name, msg, "", "", 0);
+            }));
+        }
+        // Parameter set actions of node i, forwarded into the loop.
+        let tx2 = tx.clone();
+        std::thread::Builder::new()
+            .name(format!("params {}", cfg.name))
+            .spawn(move || {
+                while let Ok((n, v)) = prx.recv() {
+                    if tx2.send(Event::Reconfigure(i, n, v)).is_err() {
+                        break;
+                    }
+                }
+            })
+            .map_err(|e| HostError::Dds(format!("thread: {e}")))?;
+        p.sim_time |= matches!(cfg.params.get("use_sim_time"), Some(ParamValue::Bool(true)));
+        p.router.add(component, &cfg.name, &cfg.namespace, &cfg.remaps);
+        let params = cfg.params.clone();
+        p.configs.push((cfg, params));
+        p.dds_nodes.push(dn);
+    }
+    if p.dds_nodes.is_empty() {
+        return Err(HostError::Dds("no node to run".into()));
+    }
+    Ok(p)
+}
+
+/// A publisher for every output, on the node that produces it; and the camera streams among
+/// them.
+fn make_publishers(
+    router: &crate::router::Router,
+    dds_nodes: &mut [DdsNode],
+    configs: &[(HostConfig, Params)],
+) -> Result<(Publishers, Vec<String>), HostError> {
+    let mut pubs = Publishers::default();
+    let mut sensor_topics = Vec::new();
+    for (ni, n) in router.nodes().iter().enumerate() {
+        let table = QosTable::from_params(&configs[ni].1).map_err(HostError::Dds)?;
+        for (p, topic) in &n.outputs {
+            if !pubs.has(topic) {
+                let pb = dds_nodes[ni].make_publisher(topic, p.type_name, table.get(p.qos))?;
+                pubs.0.push((topic.clone(), pb));
+                if p.qos == QosClass::Sensor {
+                    sensor_topics.push(topic.clone());
+                }
+                log::info!("{}: publishes {topic} ({})", n.name, p.type_name);
+            }
+        }
+    }
+    Ok((pubs, sensor_topics))
+}
+
+/// A topic subscribed over DDS: its name, its port, and the process's own writers on it (whose
+/// samples were delivered in memory already).
+type External = (String, Port, Arc<Vec<ros2_client::Gid>>);
+
+/// DDS subscriptions for what comes from outside the process: topics no node here publishes,
+/// and the shared ones (tf, scan events) that others may publish too. Each is made on the
+/// first node that takes it; its samples reach the loop as [`Event::Message`] with its index.
+fn subscribe_externals(
+    router: &crate::router::Router,
+    dds_nodes: &mut [DdsNode],
+    configs: &[(HostConfig, Params)],
+    pubs: &Publishers,
+    feed: &Feed,
+) -> Result<Vec<External>, HostError> {
+    let mut externals: Vec<External> =
+        router.external_inputs().into_iter().map(|(t, p)| (t, p, Arc::default())).collect();
+    for (topic, p) in router.shared_inputs() {
+        let own: Vec<ros2_client::Gid> = pubs.0.iter().filter(|(t, _)| *t == topic).map(|(_, pb)| pb.gid()).collect();
+        externals.push((topic, p, Arc::new(own)));
+    }
+    for (k, (topic, p, ignore)) in externals.iter().enumerate() {
+        let ni = router.nodes().iter().position(|n| n.inputs.iter().any(|(_, t)| t == topic)).unwrap_or(0);
+        let table = QosTable::from_params(&configs[ni].1).map_err(HostError::Dds)?;
+        subscribe(
+            dds_nodes[ni].node(),
+            topic,
+            p.type_name,
+            table.get(p.qos),
+            p.qos == QosClass::Sensor,
+            k,
+            feed.clone(),
+            ignore.clone(),
+        )?;
+        log::info!("{}: subscribed {topic} ({})", router.nodes()[ni].name, p.type_name);
+    }
+    Ok(externals)
+}
+
+/// `/clock` through a participant of its own, whose node never spins: ros2-client's spinner
+/// subscribes `/clock` itself, typed builtin_interfaces/Time (not rosgraph_msgs/Clock as ROS 2
+/// has it); two types on one topic in one participant make RustDDS drop the topic.
+fn clock_subscription(env: &DdsEnv, feed: &Feed) -> Result<(Context, Node), HostError> {
+    let cctx = env.context()?;
+    let name = NodeName::new("/", "_xsurf_clock").map_err(|e| HostError::Dds(format!("clock node: {e:?}")))?;
+    let mut cnode = cctx
+        .new_node(name, NodeOptions::new().enable_rosout(false))
+        .map_err(|e| HostError::Dds(format!("clock node: {e:?}")))?;
+    // Best effort, as rclcpp's ClockQoS: it matches reliable and best-effort publishers.
+    subscribe(
+        &mut cnode,
+        "/clock",
+        "rosgraph_msgs/msg/Clock",
+        qos(QosClass::Sensor),
+        false,
+        usize::MAX,
+        feed.clone(),
+        Arc::default(),
+    )?;
+    Ok((cctx, cnode))
+}
+
+/// What the executor calls for every message a node publishes: hand it to the topic's publisher
+/// thread (a camera stream whose thread is behind drops it; others wait); failures are counted
+/// and logged (the first five, then at powers of two).
+fn publish_tap(publishers: &PublishThreads, pub_errors: &Arc<AtomicU64>) -> crate::threads::SharedTap {
+    let pub_errors = pub_errors.clone();
+    let senders = publishers.senders.clone();
+    Arc::new(move |topic: &str, m: &Msg| {
+        let Some((_, tx, droppable)) = senders.iter().find(|(t, _, _)| t == topic) else {
+            log::error!("no publisher on {topic}");
+            return;
+        };
+        let sent = if *droppable {
+            match tx.try_send(m.clone()) {
+                Err(TrySendError::Full(_)) => Err("its publisher is behind: dropped".to_string()),
+                r => r.map_err(|e| e.to_string()),
+            }
+        } else {
+            tx.send(m.clone()).map_err(|e| e.to_string())
+        };
+        if let Err(e) = sent {
+            let n = pub_errors.fetch_add(1, Ordering::Relaxed) + 1;
+            if n <= 5 || n.is_power_of_two() {
+                log::warn!("publish on {topic} failed ({n} so far): {e}");
+            }
+        }
+    })
+}
+
+/// One spinner thread per node: its parameter services.
+fn start_spinners(dds_nodes: &mut [DdsNode]) -> Result<(), HostError> {
+    for dn in dds_nodes {
+        let spinner = dn.node.spinner().map_err(|e| HostError::Dds(format!("spinner: {e:?}")))?;
+        std::thread::Builder::new()
+            .name("spinner".into())
+            .spawn(move || {
+                if let Err(e) = futures::executor::block_on(spinner.spin()) {
+                    log::error!("parameter services stopped: {e:?}");
+                }
+            })
+            .map_err(|e| HostError::Dds(format!("thread: {e}")))?;
+    }
+    Ok(())
+}
+
+/// The host's loop until a stop (SIGINT/SIGTERM) or a node dies (named in the result): DDS
+/// samples into the graph, `/clock`, run-time parameter sets.
+fn serve(
+    graph: &crate::threads::Threads,
+    rx: &Receiver<Event>,
+    externals: &[External],
+    configs: &mut [(HostConfig, Params)],
+    stop: &AtomicBool,
+) -> Option<String> {
     while !stop.load(Ordering::SeqCst) {
         if let Some(name) = graph.dead_node() {
             log::error!("{name} stopped unexpectedly; shutting the process down");
-            died = Some(name);
-            break;
+            return Some(name);
         }
         match rx.recv_timeout(Duration::from_millis(100)) {
             Ok(Event::Message(k, m)) => {
@@ -800,22 +895,15 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
             Err(RecvTimeoutError::Disconnected) => break,
         }
     }
-    log::info!("shutting down");
-    stop.store(true, Ordering::SeqCst);
-    let d = dropped.load(Ordering::Relaxed) + graph.dropped();
-    let overflowed = graph.overflowed();
-    let nodes = graph.finish();
-    if d > 0 {
-        log::warn!("{d} camera message(s) dropped while a node was busy");
-    }
-    if overflowed > 0 {
-        log::error!("{overflowed} message(s) dropped because a node's inbox stayed full");
-    }
-    // The last outputs leave through the publisher threads before the count.
-    publishers.join();
-    let mut errors = pub_errors.load(Ordering::Relaxed);
-    let ran = started.elapsed().as_secs_f64().max(1e-9);
-    for n in &nodes {
+    None
+}
+
+/// Logs each node's figures at shutdown (messages, busy share, counters, refusals); returns the
+/// messages refused in all.
+fn log_node_figures(nodes: &[crate::router::Placed], ran_s: f64) -> u64 {
+    let ran = ran_s.max(1e-9);
+    let mut errors = 0;
+    for n in nodes {
         errors += n.errors;
         // Time in the component's own code (not DDS, not serialization): per-node CPU when
         // several share a process.
@@ -837,17 +925,7 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
             );
         }
     }
-    // Give reliable writers a moment to deliver the last output, then leave the graph.
-    std::thread::sleep(Duration::from_millis(200));
-    // Dropping a node stops its spinner (ros2-client's Drop signals it; signalling it first
-    // by hand as well filled the one-slot channel, and the Drop then logged an error).
-    drop(nodes);
-    drop(dds_nodes);
-    drop(ctx);
-    if let Some(name) = died {
-        return Err(HostError::NodeDied(name));
-    }
-    Ok(errors)
+    errors
 }
 
 /// Publishers by topic.

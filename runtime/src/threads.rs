@@ -516,6 +516,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::disallowed_methods)] // the threads of the test need no names
     fn a_bulk_thread_runs_at_the_lower_priority_and_others_do_not() {
         // Field 19 of /proc/thread-self/stat is the thread's nice value (after the `(comm)`).
         let nice = || {
