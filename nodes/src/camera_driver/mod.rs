@@ -425,6 +425,97 @@ impl CameraDriverNode {
         }
     }
 
+    /// Files source: the next file of the sequence, for the frame slot `slot` (its stamp, unless
+    /// the timestamps file gives one).
+    fn file_frame(&mut self, slot: i64, out: &mut Outbox) {
+        let Source::Files { list, stamps, repeat } = &self.cfg.source else { return };
+        let mut i = self.next_file;
+        if i >= list.len() {
+            if !*repeat {
+                return;
+            }
+            i = 0;
+        }
+        self.next_file = i + 1;
+        let stamp = match stamps {
+            Some(s) => s[i],
+            None => slot,
+        };
+        if self.cache.len() != list.len() {
+            self.cache = vec![None; list.len()];
+            self.cache_bytes = 0;
+        }
+        let mut img = match self.cache[i].as_deref() {
+            Some(img) => img.clone(),
+            None => match xsurf_formats::frames::read_frame(&list[i]) {
+                Ok(img) => {
+                    if *repeat && self.cache_bytes + img.data.len() <= CACHE_BYTES {
+                        self.cache_bytes += img.data.len();
+                        self.cache[i] = Some(Arc::new(img.clone()));
+                    }
+                    img
+                }
+                Err(e) => {
+                    self.read_errors += 1;
+                    log::error!("camera_driver: {e}");
+                    return;
+                }
+            },
+        };
+        if self.cfg.rotate_180 {
+            rotate_180(&mut img);
+        }
+        let Some(model) = model_for(&self.cfg, &self.camera, &mut self.rig_model, img.width, img.height) else {
+            return;
+        };
+        if (model.width, model.height) != (img.width, img.height) {
+            self.read_errors += 1;
+            log::error!(
+                "camera_driver: {} is {}x{}, the calibration is for {}x{}",
+                list[i].display(),
+                img.width,
+                img.height,
+                model.width,
+                model.height
+            );
+            return;
+        }
+        let all_done = (self.next_file == list.len() && !*repeat).then_some(list.len());
+        self.publish_frame(stamp, &model, img, out);
+        if let Some(n) = all_done {
+            log::info!("camera_driver: all {n} frames published");
+        }
+    }
+
+    /// Synthetic source: what the camera sees at `now_ns` with the C-arm where `/tf` says.
+    fn synthetic_frame(&mut self, now_ns: i64, out: &mut Outbox) {
+        let Some(pose) = self.pose_at(now_ns) else { return };
+        let laser = self.laser_on;
+        let frame = self.frames;
+        let rotate = self.cfg.rotate_180;
+        let info = self.cfg.camera_info;
+        let (img, model) = match self.scanner() {
+            Ok((s, i)) => match s.rig.cameras[*i].model() {
+                Ok(m) => {
+                    let mut img = s.render_at(*i, &pose, laser, frame);
+                    if rotate {
+                        rotate_180(&mut img);
+                    }
+                    (img, info.unwrap_or(m))
+                }
+                Err(e) => {
+                    log::error!("camera_driver: {e}");
+                    return;
+                }
+            },
+            Err(e) => {
+                log::error!("camera_driver: {e}");
+                return;
+            }
+        };
+        self.publish_frame(now_ns, &model, img, out);
+    }
+
     /// `table -> carm` at `t`, extrapolated linearly from the two newest samples.
     fn pose_at(&self, t: i64) -> Option<Iso3> {
         match self.poses {
@@ -533,90 +624,11 @@ impl Component for CameraDriverNode {
         // the stamps fall behind the clock the C-arm's pose is on.
         let slot = next + behind * self.cfg.period_ns;
         self.next_ns = Some(slot + self.cfg.period_ns);
-        if let Source::Files { list, stamps, repeat } = &self.cfg.source {
-            let mut i = self.next_file;
-            if i >= list.len() {
-                if !*repeat {
-                    return;
-                }
-                i = 0;
-            }
-            self.next_file = i + 1;
-            let stamp = match stamps {
-                Some(s) => s[i],
-                None => slot,
-            };
-            if self.cache.len() != list.len() {
-                self.cache = vec![None; list.len()];
-                self.cache_bytes = 0;
-            }
-            let mut img = match self.cache[i].as_deref() {
-                Some(img) => img.clone(),
-                None => match xsurf_formats::frames::read_frame(&list[i]) {
-                    Ok(img) => {
-                        if *repeat && self.cache_bytes + img.data.len() <= CACHE_BYTES {
-                            self.cache_bytes += img.data.len();
-                            self.cache[i] = Some(Arc::new(img.clone()));
-                        }
-                        img
-                    }
-                    Err(e) => {
-                        self.read_errors += 1;
-                        log::error!("camera_driver: {e}");
-                        return;
-                    }
-                },
-            };
-            if self.cfg.rotate_180 {
-                rotate_180(&mut img);
-            }
-            let Some(model) = model_for(&self.cfg, &self.camera, &mut self.rig_model, img.width, img.height) else {
-                return;
-            };
-            if (model.width, model.height) != (img.width, img.height) {
-                self.read_errors += 1;
-                log::error!(
-                    "camera_driver: {} is {}x{}, the calibration is for {}x{}",
-                    list[i].display(),
-                    img.width,
-                    img.height,
-                    model.width,
-                    model.height
-                );
-                return;
-            }
-            let all_done = (self.next_file == list.len() && !*repeat).then_some(list.len());
-            self.publish_frame(stamp, &model, img, out);
-            if let Some(n) = all_done {
-                log::info!("camera_driver: all {n} frames published");
-            }
-            return;
+        if matches!(self.cfg.source, Source::Files { .. }) {
+            self.file_frame(slot, out);
+        } else {
+            self.synthetic_frame(now_ns, out);
         }
-        let Some(pose) = self.pose_at(now_ns) else { return };
-        let laser = self.laser_on;
-        let frame = self.frames;
-        let rotate = self.cfg.rotate_180;
-        let info = self.cfg.camera_info;
-        let (img, model) = match self.scanner() {
-            Ok((s, i)) => match s.rig.cameras[*i].model() {
-                Ok(m) => {
-                    let mut img = s.render_at(*i, &pose, laser, frame);
-                    if rotate {
-                        rotate_180(&mut img);
-                    }
-                    (img, info.unwrap_or(m))
-                }
-                Err(e) => {
-                    log::error!("camera_driver: {e}");
-                    return;
-                }
-            },
-            Err(e) => {
-                log::error!("camera_driver: {e}");
-                return;
-            }
-        };
-        self.publish_frame(now_ns, &model, img, out);
     }
     fn finish(&mut self, out: &mut Outbox) {
         if let Some(report) = self.tally.report() {
