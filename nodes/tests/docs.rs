@@ -21,7 +21,11 @@ fn tables() -> Vec<(String, String)> {
 fn blessed(readme: &str) -> String {
     let mut s = readme.to_string();
     for (heading, table) in tables() {
-        let at = s.find(&heading).unwrap_or_else(|| panic!("nodes/README.md has no section {heading:?}"));
+        let Some(at) = s.find(&heading) else {
+            // A new node: its section and table at the end, to be described by hand.
+            s.push_str(&format!("\n{heading}\n{table}"));
+            continue;
+        };
         let start = at + s[at..].find("\n| parameter |").unwrap() + 1;
         let len = s[start..].split_inclusive('\n').take_while(|l| l.starts_with('|')).map(str::len).sum::<usize>();
         s.replace_range(start..start + len, &table);
