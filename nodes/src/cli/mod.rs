@@ -503,94 +503,106 @@ fn cmd_demo(args: &[String]) -> anyhow::Result<()> {
 
 fn cmd_bag(args: &[String]) -> anyhow::Result<()> {
     match args.first().map(String::as_str) {
-        Some("record") => {
-            // Started as a launch file's node, it is given `--ros-args ...` (its name and
-            // namespace): a recorder has no use for them.
-            let end = args.iter().position(|a| a == "--ros-args").unwrap_or(args.len());
-            let args = &args[..end];
-            let a = Args::parse(
-                &args[1..],
-                &Syntax {
-                    flags: &["--all", "--zstd", "--split-by-scan"],
-                    valued: &["-o", "--output", "--duration"],
-                    group: None,
-                },
-            )?;
-            let out = a.get("-o").or(a.get("--output")).ok_or_else(|| usage("bag record needs -o DIR"))?;
-            let opts = crate::record::RecordOptions {
-                topics: a.positional.clone(),
-                all: a.has("--all"),
-                zstd: a.has("--zstd"),
-                split_by_scan: a.has("--split-by-scan"),
-                duration_s: a
-                    .get("--duration")
-                    .map(|d| d.parse())
-                    .transpose()
-                    .map_err(|_| usage("--duration: not a number"))?,
-            };
-            let n = crate::record::record(Path::new(out), &opts)?;
-            eprintln!("bag record: {n} messages written to {out}");
-            Ok(())
-        }
-        Some("play") => {
-            let a = Args::parse(
-                &args[1..],
-                &Syntax {
-                    flags: &["--loop", "--clock"],
-                    valued: &["--rate", "--start-offset", "--delay", "--topics"],
-                    group: None,
-                },
-            )?;
-            let [dir] = a.positional.as_slice() else { return Err(usage("bag play needs one DIR")) };
-            let opts = crate::play::PlayOptions {
-                rate: a.num("--rate", 1.0)?,
-                repeat: a.has("--loop"),
-                clock: a.has("--clock"),
-                topics: a.get("--topics").map(|t| t.split(',').map(str::to_string).collect()).unwrap_or_default(),
-                start_offset_s: a.num("--start-offset", 0.0)?,
-                delay_s: a.num("--delay", 1.0)?,
-            };
-            let n = crate::play::play(Path::new(dir), &opts)?;
-            eprintln!("bag play: {n} messages published");
-            Ok(())
-        }
-        Some("info") => {
-            let [dir] = &args[1..] else { return Err(usage("bag info needs one DIR")) };
-            let bag = xsurf_formats::bag::Bag::open(Path::new(dir))?;
-            match &bag.indexed {
-                // A recorder killed before it wrote metadata.yaml: what its files hold.
-                Some(cut) => {
-                    eprintln!(
-                        "bag info: {dir} has no metadata.yaml; indexed from its storage files (`xsurf bag reindex {dir}` writes one)"
-                    );
-                    for c in cut {
-                        eprintln!("bag info: {c}; counted up to there");
-                    }
-                }
-                None => bag.verify_storage()?,
-            }
-            write_stdout(&bag.info());
-            Ok(())
-        }
-        Some("reindex") => {
-            let a = Args::parse(&args[1..], &Syntax { flags: &["--force"], valued: &[], group: None })?;
-            let [dir] = a.positional.as_slice() else { return Err(usage("bag reindex needs one DIR")) };
-            let r = xsurf_formats::bag::reindex(Path::new(dir), a.has("--force"))?;
-            for c in &r.cut {
-                eprintln!("bag reindex: {c}; its messages before that are indexed");
-            }
-            println!(
-                "bag reindex: {}/metadata.yaml written: {} file(s), {} topic(s), {} messages",
-                dir,
-                r.metadata.files.len(),
-                r.metadata.topics.len(),
-                r.metadata.message_count
-            );
-            Ok(())
-        }
+        Some("record") => bag_record(args),
+        Some("play") => bag_play(args),
+        Some("info") => bag_info(args),
+        Some("reindex") => bag_reindex(args),
         Some(other) => Err(usage(format!("unknown bag command {other:?} (info, play, record, reindex)"))),
         None => Err(usage("bag needs a command (info, play, record, reindex)")),
     }
+}
+
+/// `xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--split-by-scan] [--duration S]`.
+fn bag_record(args: &[String]) -> anyhow::Result<()> {
+    // Started as a launch file's node, it is given `--ros-args ...` (its name and
+    // namespace): a recorder has no use for them.
+    let end = args.iter().position(|a| a == "--ros-args").unwrap_or(args.len());
+    let args = &args[..end];
+    let a = Args::parse(
+        &args[1..],
+        &Syntax {
+            flags: &["--all", "--zstd", "--split-by-scan"],
+            valued: &["-o", "--output", "--duration"],
+            group: None,
+        },
+    )?;
+    let out = a.get("-o").or(a.get("--output")).ok_or_else(|| usage("bag record needs -o DIR"))?;
+    let opts = crate::record::RecordOptions {
+        topics: a.positional.clone(),
+        all: a.has("--all"),
+        zstd: a.has("--zstd"),
+        split_by_scan: a.has("--split-by-scan"),
+        duration_s: a
+            .get("--duration")
+            .map(|d| d.parse())
+            .transpose()
+            .map_err(|_| usage("--duration: not a number"))?,
+    };
+    let n = crate::record::record(Path::new(out), &opts)?;
+    eprintln!("bag record: {n} messages written to {out}");
+    Ok(())
+}
+
+/// `xsurf bag play DIR [--rate R] [--loop] [--clock] [--topics T1,T2] [--start-offset S] [--delay S]`.
+fn bag_play(args: &[String]) -> anyhow::Result<()> {
+    let a = Args::parse(
+        &args[1..],
+        &Syntax {
+            flags: &["--loop", "--clock"],
+            valued: &["--rate", "--start-offset", "--delay", "--topics"],
+            group: None,
+        },
+    )?;
+    let [dir] = a.positional.as_slice() else { return Err(usage("bag play needs one DIR")) };
+    let opts = crate::play::PlayOptions {
+        rate: a.num("--rate", 1.0)?,
+        repeat: a.has("--loop"),
+        clock: a.has("--clock"),
+        topics: a.get("--topics").map(|t| t.split(',').map(str::to_string).collect()).unwrap_or_default(),
+        start_offset_s: a.num("--start-offset", 0.0)?,
+        delay_s: a.num("--delay", 1.0)?,
+    };
+    let n = crate::play::play(Path::new(dir), &opts)?;
+    eprintln!("bag play: {n} messages published");
+    Ok(())
+}
+
+/// `xsurf bag info DIR`.
+fn bag_info(args: &[String]) -> anyhow::Result<()> {
+    let [dir] = &args[1..] else { return Err(usage("bag info needs one DIR")) };
+    let bag = xsurf_formats::bag::Bag::open(Path::new(dir))?;
+    match &bag.indexed {
+        // A recorder killed before it wrote metadata.yaml: what its files hold.
+        Some(cut) => {
+            eprintln!(
+                "bag info: {dir} has no metadata.yaml; indexed from its storage files (`xsurf bag reindex {dir}` writes one)"
+            );
+            for c in cut {
+                eprintln!("bag info: {c}; counted up to there");
+            }
+        }
+        None => bag.verify_storage()?,
+    }
+    write_stdout(&bag.info());
+    Ok(())
+}
+
+/// `xsurf bag reindex DIR [--force]`.
+fn bag_reindex(args: &[String]) -> anyhow::Result<()> {
+    let a = Args::parse(&args[1..], &Syntax { flags: &["--force"], valued: &[], group: None })?;
+    let [dir] = a.positional.as_slice() else { return Err(usage("bag reindex needs one DIR")) };
+    let r = xsurf_formats::bag::reindex(Path::new(dir), a.has("--force"))?;
+    for c in &r.cut {
+        eprintln!("bag reindex: {c}; its messages before that are indexed");
+    }
+    println!(
+        "bag reindex: {}/metadata.yaml written: {} file(s), {} topic(s), {} messages",
+        dir,
+        r.metadata.files.len(),
+        r.metadata.topics.len(),
+        r.metadata.message_count
+    );
+    Ok(())
 }
 
 fn cmd_launch(args: &[String]) -> ExitCode {
