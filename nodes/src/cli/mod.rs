@@ -310,43 +310,8 @@ fn cmd_synth(args: &[String]) -> anyhow::Result<()> {
     let out = a.get("-o").or(a.get("--out")).ok_or_else(|| usage("synth needs -o DIR"))?;
     let s = scanner(&a, scene)?;
     if let Some(n) = a.get("--frames") {
-        // Image files for the camera_driver's files source: N frames from the middle of the scan,
-        // PGM (mono8), or with --compressed JPEG or PNG files (any encoding).
         let n: u32 = n.parse().map_err(|_| usage(format!("--frames {n}: not a count")))?;
-        let total = s.frame_count();
-        let first = total.saturating_sub(n) / 2;
-        let ext = match compressed {
-            None => "pgm",
-            Some((xsurf_formats::compressed::Codec::Jpeg, _)) => "jpg",
-            Some((xsurf_formats::compressed::Codec::Png, _)) => "png",
-        };
-        for (ci, c) in s.rig.cameras.iter().enumerate() {
-            let dir = Path::new(out).join(&c.name);
-            std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-            for f in first..(first + n).min(total) {
-                let img = s.render(ci, f);
-                let path = dir.join(format!("frame_{:04}.{ext}", f - first));
-                match compressed {
-                    Some((codec, quality)) => {
-                        let (_, bytes) =
-                            xsurf_formats::compressed::encode(&img, codec, quality).map_err(anyhow::Error::msg)?;
-                        xsurf_formats::write_bytes_atomic(&path, &bytes)?;
-                    }
-                    None => match img.encoding {
-                        xsurf_core::image::Encoding::Mono8 | xsurf_core::image::Encoding::Mono16 => {
-                            xsurf_formats::frames::write_pgm(&path, &img)?
-                        }
-                        _ => {
-                            return Err(usage(
-                                "--frames writes mono8 frames as PGM (colour: add --compressed jpeg or png)",
-                            ))
-                        }
-                    },
-                }
-            }
-        }
-        println!("wrote {} frames per camera as {out}/<camera>/frame_NNNN.{ext}", n.min(total));
-        return Ok(());
+        return write_frames(&s, Path::new(out), n, compressed);
     }
     let summary = synth::write_bag(Path::new(out), &s, a.has("--zstd"), 1, compressed, progress_printer("synth"))?;
     println!(
@@ -356,6 +321,48 @@ fn cmd_synth(args: &[String]) -> anyhow::Result<()> {
         summary.cameras.len(),
         summary.messages
     );
+    Ok(())
+}
+
+/// `synth --frames N`: image files for the camera_driver's files source, N frames from the
+/// middle of the scan, PGM (mono8), or with `--compressed` JPEG or PNG files (any encoding).
+fn write_frames(
+    s: &Scanner,
+    out: &Path,
+    n: u32,
+    compressed: Option<(xsurf_formats::compressed::Codec, u8)>,
+) -> anyhow::Result<()> {
+    let total = s.frame_count();
+    let first = total.saturating_sub(n) / 2;
+    let ext = match compressed {
+        None => "pgm",
+        Some((xsurf_formats::compressed::Codec::Jpeg, _)) => "jpg",
+        Some((xsurf_formats::compressed::Codec::Png, _)) => "png",
+    };
+    for (ci, c) in s.rig.cameras.iter().enumerate() {
+        let dir = out.join(&c.name);
+        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        for f in first..(first + n).min(total) {
+            let img = s.render(ci, f);
+            let path = dir.join(format!("frame_{:04}.{ext}", f - first));
+            match compressed {
+                Some((codec, quality)) => {
+                    let (_, bytes) =
+                        xsurf_formats::compressed::encode(&img, codec, quality).map_err(anyhow::Error::msg)?;
+                    xsurf_formats::write_bytes_atomic(&path, &bytes)?;
+                }
+                None => match img.encoding {
+                    xsurf_core::image::Encoding::Mono8 | xsurf_core::image::Encoding::Mono16 => {
+                        xsurf_formats::frames::write_pgm(&path, &img)?
+                    }
+                    _ => {
+                        return Err(usage("--frames writes mono8 frames as PGM (colour: add --compressed jpeg or png)"))
+                    }
+                },
+            }
+        }
+    }
+    println!("wrote {} frames per camera as {}/<camera>/frame_NNNN.{ext}", n.min(total), out.display());
     Ok(())
 }
 
