@@ -356,6 +356,103 @@ impl MesherNode {
     }
 }
 
+impl MesherNode {
+    /// A profile: into the scan's grid if it was exposed in the scan; the growing cloud at its rate.
+    fn profile(&mut self, c: &PointCloud2, out: &mut Outbox) -> Result<(), NodeError> {
+        let p = convert::cloud_profile(c).map_err(|e| NodeError::new(format!("profile: {e}")))?;
+        if !self.active {
+            // Outside a scan bounded by events, frames belong to no scan; the last few
+            // are kept, since a frame stamped after START may arrive before the START
+            // event. Without any event (a bag of one scan), the first frame with
+            // points starts scan 0.
+            if self.events_seen {
+                self.early.push_back((c.header.stamp.nanos(), p));
+                if self.early.len() > EARLY_FRAMES {
+                    self.early.pop_front();
+                    self.outside_scan += 1;
+                }
+                return Ok(());
+            }
+            if p.valid() == 0 {
+                self.outside_scan += 1;
+                return Ok(());
+            }
+            self.start(0, None);
+        }
+        let stamp = c.header.stamp.nanos();
+        // A frame exposed after END: the scan it would close is complete.
+        if self.closing.is_some_and(|(_, end)| stamp >= end) {
+            self.close_pending(out);
+            self.outside_scan += 1;
+            return Ok(());
+        }
+        // A frame exposed before START that arrives after it (the pipeline's latency)
+        // is not part of the scan either: scans are bounded by stamps, not arrivals.
+        if self.account.start_ns.is_some_and(|s| stamp < s) {
+            self.outside_scan += 1;
+            return Ok(());
+        }
+        self.push(stamp, &p)?;
+        if let Some(period) = self.cfg.cloud_period_ns {
+            if stamp.saturating_sub(self.last_cloud_ns) >= period {
+                self.last_cloud_ns = stamp;
+                let h = convert::header(stamp, &self.cfg.frame_id);
+                out.publish(OUT_CLOUD, Msg::Cloud(Arc::new(convert::grid_cloud(&self.grid, h))));
+            }
+        }
+        Ok(())
+    }
+
+    /// START, END or ABORT of a scan.
+    fn event(&mut self, e: &ScanEvent, out: &mut Outbox) -> Result<(), NodeError> {
+        self.events_seen = true;
+        match e.event {
+            ScanEvent::START => {
+                self.close_pending(out);
+                self.close(false, None, out);
+                self.last_mesh.clear();
+                let start = e.header.stamp.nanos();
+                self.start(e.scan_id, Some(start));
+                for (stamp, p) in std::mem::take(&mut self.early) {
+                    if stamp < start {
+                        self.outside_scan += 1;
+                    } else if let Err(e) = self.push(stamp, &p) {
+                        log::warn!("{}: profile at {}: {e}", self.camera, convert::fmt_stamp(stamp));
+                    }
+                }
+            }
+            ScanEvent::END | ScanEvent::ABORT if self.active && self.closing.is_none() => {
+                let aborted = e.event == ScanEvent::ABORT;
+                self.closing = Some((aborted, e.header.stamp.nanos()));
+                if self.cfg.end_grace_ns == 0 {
+                    self.close_pending(out);
+                }
+            }
+            ScanEvent::END | ScanEvent::ABORT => {}
+            other => return Err(NodeError::new(format!("unknown scan event {other}"))),
+        }
+        Ok(())
+    }
+
+    /// The camera's image size: the samples per frame of its grid.
+    fn camera_info(&mut self, i: &CameraInfo) -> Result<(), NodeError> {
+        let n = match self.cfg.orientation {
+            Orientation::Vertical => i.height,
+            Orientation::Horizontal => i.width,
+        };
+        if !xsurf_core::limits::image_side_ok(i.width) || !xsurf_core::limits::image_side_ok(i.height) {
+            return Err(NodeError::new(format!(
+                "camera_info size {}x{} is outside {} pixels a side",
+                i.width,
+                i.height,
+                xsurf_core::limits::image_side_text()
+            )));
+        }
+        self.samples = Some(n as usize);
+        Ok(())
+    }
+}
+
 impl Component for MesherNode {
     fn node_name(&self) -> &'static str {
         "mesher"
@@ -391,95 +488,9 @@ impl Component for MesherNode {
     }
     fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
         match (input, msg) {
-            (IN_PROFILE, Msg::Cloud(c)) => {
-                let p = convert::cloud_profile(c).map_err(|e| NodeError::new(format!("profile: {e}")))?;
-                if !self.active {
-                    // Outside a scan bounded by events, frames belong to no scan; the last few
-                    // are kept, since a frame stamped after START may arrive before the START
-                    // event. Without any event (a bag of one scan), the first frame with
-                    // points starts scan 0.
-                    if self.events_seen {
-                        self.early.push_back((c.header.stamp.nanos(), p));
-                        if self.early.len() > EARLY_FRAMES {
-                            self.early.pop_front();
-                            self.outside_scan += 1;
-                        }
-                        return Ok(());
-                    }
-                    if p.valid() == 0 {
-                        self.outside_scan += 1;
-                        return Ok(());
-                    }
-                    self.start(0, None);
-                }
-                let stamp = c.header.stamp.nanos();
-                // A frame exposed after END: the scan it would close is complete.
-                if self.closing.is_some_and(|(_, end)| stamp >= end) {
-                    self.close_pending(out);
-                    self.outside_scan += 1;
-                    return Ok(());
-                }
-                // A frame exposed before START that arrives after it (the pipeline's latency)
-                // is not part of the scan either: scans are bounded by stamps, not arrivals.
-                if self.account.start_ns.is_some_and(|s| stamp < s) {
-                    self.outside_scan += 1;
-                    return Ok(());
-                }
-                self.push(stamp, &p)?;
-                if let Some(period) = self.cfg.cloud_period_ns {
-                    if stamp.saturating_sub(self.last_cloud_ns) >= period {
-                        self.last_cloud_ns = stamp;
-                        let h = convert::header(stamp, &self.cfg.frame_id);
-                        out.publish(OUT_CLOUD, Msg::Cloud(Arc::new(convert::grid_cloud(&self.grid, h))));
-                    }
-                }
-                Ok(())
-            }
-            (IN_EVENTS, Msg::ScanEvent(e)) => {
-                self.events_seen = true;
-                match e.event {
-                    ScanEvent::START => {
-                        self.close_pending(out);
-                        self.close(false, None, out);
-                        self.last_mesh.clear();
-                        let start = e.header.stamp.nanos();
-                        self.start(e.scan_id, Some(start));
-                        for (stamp, p) in std::mem::take(&mut self.early) {
-                            if stamp < start {
-                                self.outside_scan += 1;
-                            } else if let Err(e) = self.push(stamp, &p) {
-                                log::warn!("{}: profile at {}: {e}", self.camera, convert::fmt_stamp(stamp));
-                            }
-                        }
-                    }
-                    ScanEvent::END | ScanEvent::ABORT if self.active && self.closing.is_none() => {
-                        let aborted = e.event == ScanEvent::ABORT;
-                        self.closing = Some((aborted, e.header.stamp.nanos()));
-                        if self.cfg.end_grace_ns == 0 {
-                            self.close_pending(out);
-                        }
-                    }
-                    ScanEvent::END | ScanEvent::ABORT => {}
-                    other => return Err(NodeError::new(format!("unknown scan event {other}"))),
-                }
-                Ok(())
-            }
-            (IN_INFO, Msg::CameraInfo(i)) => {
-                let n = match self.cfg.orientation {
-                    Orientation::Vertical => i.height,
-                    Orientation::Horizontal => i.width,
-                };
-                if !xsurf_core::limits::image_side_ok(i.width) || !xsurf_core::limits::image_side_ok(i.height) {
-                    return Err(NodeError::new(format!(
-                        "camera_info size {}x{} is outside {} pixels a side",
-                        i.width,
-                        i.height,
-                        xsurf_core::limits::image_side_text()
-                    )));
-                }
-                self.samples = Some(n as usize);
-                Ok(())
-            }
+            (IN_PROFILE, Msg::Cloud(c)) => self.profile(c, out),
+            (IN_EVENTS, Msg::ScanEvent(e)) => self.event(e, out),
+            (IN_INFO, Msg::CameraInfo(i)) => self.camera_info(i),
             (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
         }
     }
