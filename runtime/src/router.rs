@@ -154,6 +154,11 @@ impl Router {
         });
         idx
     }
+    /// Who takes each topic: `(node, input)` pairs in the order the nodes were added (the
+    /// one subscription table; the thread executor takes it over).
+    pub fn subscriptions(&self) -> &HashMap<String, Vec<(usize, usize)>> {
+        &self.subs
+    }
     /// The nodes.
     pub fn nodes(&self) -> &[Placed] {
         &self.nodes

@@ -276,13 +276,21 @@ impl Threads {
         tick_periods: &[Duration],
         sim_time: bool,
     ) -> std::io::Result<Threads> {
+        let subs: HashMap<String, Vec<Sub>> = router
+            .subscriptions()
+            .iter()
+            .map(|(topic, takers)| {
+                let subs = takers
+                    .iter()
+                    .map(|&(node, input)| {
+                        let sensor = router.nodes()[node].inputs[input].0.qos == QosClass::Sensor;
+                        Sub { node, input, sensor }
+                    })
+                    .collect();
+                (topic.clone(), subs)
+            })
+            .collect();
         let nodes = router.into_nodes();
-        let mut subs: HashMap<String, Vec<Sub>> = HashMap::new();
-        for (node, n) in nodes.iter().enumerate() {
-            for (input, (port, topic)) in n.inputs.iter().enumerate() {
-                subs.entry(topic.clone()).or_default().push(Sub { node, input, sensor: port.qos == QosClass::Sensor });
-            }
-        }
         let (txs, rxs): (Vec<_>, Vec<_>) = nodes.iter().map(|_| sync_channel::<Work>(INBOX_CAPACITY)).unzip();
         let inboxes = txs
             .into_iter()
