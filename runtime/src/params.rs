@@ -120,12 +120,12 @@ impl ParamDecl {
     pub fn range_text(&self) -> String {
         self.range.map(|(lo, hi)| format!("[{lo}, {hi}]")).unwrap_or_default()
     }
-    /// The line of a node's `--help`: `name (type, default D unit, in [lo, hi]): meaning`.
+    /// The line of a node's `--help`: `name (type, in [lo, hi], default D unit): meaning`.
     pub fn help_line(&self) -> String {
         let unit = if self.unit.is_empty() { String::new() } else { format!(" {}", self.unit) };
         let range = self.range.map(|_| format!(", in {}", self.range_text())).unwrap_or_default();
         format!(
-            "{} ({}, default {}{unit}{range}): {}",
+            "{} ({}{range}, default {}{unit}): {}",
             self.name,
             self.default.type_name(),
             self.default,
