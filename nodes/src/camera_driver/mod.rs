@@ -8,6 +8,7 @@
 //! must then describe the turned images.
 
 mod params;
+mod source;
 pub use params::*;
 
 /// The node type, as the registry lists it.
@@ -25,7 +26,7 @@ use std::sync::Arc;
 use xsurf_core::geom::Iso3;
 use xsurf_core::image::Encoding;
 use xsurf_core::rig::Rig;
-use xsurf_core::synth::{LaserModel, ScanSettings, Scanner, Scene, SCENE_NAMES};
+use xsurf_core::synth::{Scene, SCENE_NAMES};
 use xsurf_msgs::sensor_msgs::{CameraInfo, CompressedImage, Image};
 use xsurf_msgs::std_msgs::StringMsg;
 use xsurf_msgs::tf2_msgs::TFMessage;
@@ -34,8 +35,9 @@ use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
 
-/// Where the images come from.
-enum Source {
+/// Where the images come from, as the parameters describe it.
+#[derive(Debug, Clone, PartialEq)]
+enum SourceSpec {
     Synthetic,
     Files {
         list: Vec<std::path::PathBuf>,
@@ -50,7 +52,7 @@ enum Source {
 }
 
 struct Config {
-    source: Source,
+    source: SourceSpec,
     camera_info: Option<xsurf_core::camera::CameraModel>,
     rotate_180: bool,
     scene: Scene,
@@ -70,13 +72,13 @@ struct Config {
 fn config(p: &Params) -> Result<Config, ParamError> {
     let p = CameraDriverParams::from_params(p)?;
     let source = match p.source {
-        SourceKind::Synthetic => Source::Synthetic,
+        SourceKind::Synthetic => SourceSpec::Synthetic,
         SourceKind::Files => {
-            let list = frame_list(&p.files).map_err(|e| Params::invalid("files", e))?;
+            let list = source::files::frame_list(&p.files).map_err(|e| Params::invalid("files", e))?;
             let stamps = match &p.timestamps_file {
                 None => None,
                 Some(ts) => {
-                    let s = read_stamps(ts).map_err(|e| Params::invalid("timestamps_file", e))?;
+                    let s = source::files::read_stamps(ts).map_err(|e| Params::invalid("timestamps_file", e))?;
                     if s.len() < list.len() {
                         return Err(Params::invalid(
                             "timestamps_file",
@@ -86,7 +88,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
                     Some(s)
                 }
             };
-            Source::Files { list, stamps, repeat: p.loop_files }
+            SourceSpec::Files { list, stamps, repeat: p.loop_files }
         }
         SourceKind::V4l2 => {
             if !cfg!(feature = "v4l2") {
@@ -102,7 +104,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
             if !(0.0..=1.0).contains(&offset) {
                 return Err(Params::invalid("stamp_offset_s", format!("{offset:?} is not in [0, 1]")));
             }
-            Source::V4l2 { device: p.device.into(), offset_ns: (offset * 1e9).round() as i64 }
+            SourceSpec::V4l2 { device: p.device.into(), offset_ns: (offset * 1e9).round() as i64 }
         }
     };
     let url = p.camera_info_url;
@@ -165,139 +167,28 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     })
 }
 
-/// The frames of a `files` spec: a directory's image files in name order, or a printf-style
-/// pattern (`frame_%03d.bmp`) counted from 0 (or 1) until the first missing number.
-fn frame_list(spec: &str) -> Result<Vec<std::path::PathBuf>, String> {
-    use std::path::{Path, PathBuf};
-    if spec.is_empty() {
-        return Err("the files source needs a directory or a pattern".into());
-    }
-    let is_frame = |p: &Path| {
-        p.extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase())
-            .is_some_and(|e| ["bmp", "png", "pgm", "ppm", "pnm", "jpg", "jpeg"].contains(&e.as_str()))
-    };
-    let path = Path::new(spec);
-    let list: Vec<PathBuf> = if path.is_dir() {
-        let mut v: Vec<PathBuf> = std::fs::read_dir(path)
-            .map_err(|e| format!("{spec}: {e}"))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| is_frame(p))
-            .collect();
-        v.sort();
-        v
-    } else if let Some(i) = spec.find('%') {
-        let end = spec[i..].find('d').map(|j| i + j).ok_or_else(|| format!("{spec}: pattern needs %d or %0Nd"))?;
-        let width: usize = spec[i + 1..end].trim_start_matches('0').parse().unwrap_or(0);
-        let name = |n: usize| PathBuf::from(format!("{}{n:0width$}{}", &spec[..i], &spec[end + 1..]));
-        let first = if name(0).is_file() { 0 } else { 1 };
-        (first..).map(name).take_while(|p| p.is_file()).collect()
-    } else {
-        return Err(format!("{spec}: neither a directory nor a %d pattern"));
-    };
-    if list.is_empty() {
-        return Err(format!("{spec}: no frames (.bmp, .png, .pgm, .ppm)"));
-    }
-    Ok(list)
-}
-
-/// Stamps of a sidecar file: one per line, seconds (with a decimal point) or integer ns.
-fn read_stamps(path: &std::path::Path) -> Result<Vec<i64>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let l = line.trim();
-        if l.is_empty() || l.starts_with('#') {
-            continue;
-        }
-        let v = if l.contains('.') || l.contains('e') {
-            l.parse::<f64>().ok().filter(|v| v.is_finite()).map(|s| (s * 1e9).round() as i64)
-        } else {
-            l.parse::<i64>().ok()
-        };
-        out.push(v.ok_or_else(|| format!("{} line {}: {l:?} is not a stamp", path.display(), i + 1))?);
-    }
-    Ok(out)
-}
-
-/// Turns an image by 180 degrees (pixel order reversed, pixels kept whole).
-fn rotate_180(img: &mut xsurf_core::image::Image) {
-    // Reversing the bytes reverses the pixel order and each pixel's bytes; turn those back.
-    img.data.reverse();
-    let n = img.encoding.bytes_per_pixel();
-    if n > 1 {
-        img.data.chunks_exact_mut(n).for_each(<[u8]>::reverse);
-    }
-}
-
-/// The camera model for frames of `width` x `height`: `camera_info_url`'s, else the rig's
-/// intrinsics scaled to the frames (kept in `cache`); `None` (logged) if the camera is in neither.
-fn model_for(
-    cfg: &Config,
-    camera: &str,
-    cache: &mut Option<xsurf_core::camera::CameraModel>,
-    width: u32,
-    height: u32,
-) -> Option<xsurf_core::camera::CameraModel> {
-    match (&cfg.camera_info, *cache) {
-        (Some(m), _) => Some(*m),
-        (None, Some(m)) if (m.width, m.height) == (width, height) => Some(m),
-        (None, _) => {
-            let study;
-            let rig = match &cfg.rig {
-                Some(r) => r,
-                None => {
-                    study = Rig::study(width, height);
-                    &study
-                }
-            };
-            match rig.camera(camera).map(|c| c.model()) {
-                Some(Ok(m)) => {
-                    let m = m.scaled(width, height);
-                    *cache = Some(m);
-                    Some(m)
-                }
-                _ => {
-                    log::error!("camera_driver: camera {camera:?} is not in the rig and no camera_info_url is set");
-                    None
-                }
-            }
-        }
-    }
-}
-
-/// The output of the scan reports.
 const OUT_REPORT: usize = 2;
+
+const OUT_IMAGE: usize = 0;
+const OUT_INFO: usize = 1;
 
 /// The camera driver component.
 pub struct CameraDriverNode {
     cfg: Config,
     camera: String,
-    scanner: Option<(Scanner, usize)>,
+    /// Where the frames come from.
+    source: Box<dyn source::FrameSource>,
     /// The two newest `table -> carm` samples, for extrapolating to the exposure.
     poses: [Option<(i64, Iso3)>; 2],
     laser_on: bool,
     /// The frames of the current scan, for its report.
     tally: crate::tally::ScanTally,
+    /// A paced source's next frame slot.
     next_ns: Option<i64>,
     frames: u64,
     skipped: u64,
-    next_file: usize,
-    read_errors: u64,
-    /// Files source: decoded frames kept for the next round of a loop (up to `CACHE_BYTES`).
-    cache: Vec<Option<Arc<xsurf_core::image::Image>>>,
-    cache_bytes: usize,
-    /// Files source without `camera_info_url`: the rig's intrinsics at the frames' size.
-    rig_model: Option<xsurf_core::camera::CameraModel>,
-    /// V4L2 source: the open camera, when the next attempt to open it is due, failures so far.
-    capture: Option<crate::v4l2::Capture>,
-    reopen_at: i64,
-    device_errors: u64,
     encode_errors: u64,
 }
-
-/// Decoded frames kept in memory when looping a sequence.
-const CACHE_BYTES: usize = 1 << 30;
 
 impl CameraDriverNode {
     /// Builds the node from its parameters.
@@ -305,52 +196,26 @@ impl CameraDriverNode {
         let cfg = config(p)?;
         Ok(Self {
             camera: cfg.camera.clone(),
+            source: source::build(&cfg.source),
             cfg,
-            scanner: None,
             poses: [None, None],
             laser_on: false,
             tally: Default::default(),
             next_ns: None,
             frames: 0,
             skipped: 0,
-            next_file: 0,
-            read_errors: 0,
-            cache: Vec::new(),
-            cache_bytes: 0,
-            rig_model: None,
-            capture: None,
-            reopen_at: i64::MIN,
-            device_errors: 0,
             encode_errors: 0,
         })
     }
 
-    fn scanner(&mut self) -> Result<&(Scanner, usize), NodeError> {
-        if self.scanner.is_none() {
-            let rig = self.cfg.rig.clone().unwrap_or_else(|| Rig::study(self.cfg.width, self.cfg.height));
-            let settings = ScanSettings { encoding: self.cfg.encoding, seed: self.cfg.seed, ..ScanSettings::default() };
-            let s =
-                Scanner::new(self.cfg.scene.clone(), rig, LaserModel::default(), settings).map_err(NodeError::new)?;
-            let i = s
-                .camera_index(&self.camera)
-                .ok_or_else(|| NodeError::new(format!("camera {:?} is not in the rig", self.camera)))?;
-            self.scanner = Some((s, i));
-        }
-        self.scanner.as_ref().ok_or_else(|| NodeError::new("no scanner"))
-    }
-
-    /// Publishes a frame and its camera_info, both stamped `stamp` in the camera's optical frame.
-    fn publish_frame(
-        &mut self,
-        stamp: i64,
-        model: &xsurf_core::camera::CameraModel,
-        img: xsurf_core::image::Image,
-        out: &mut Outbox,
-    ) {
+    /// Publishes a frame and its camera_info, both stamped with the frame's stamp in the
+    /// camera's optical frame.
+    fn publish_frame(&mut self, f: source::Frame, out: &mut Outbox) {
+        let stamp = f.stamp_ns;
         let header = convert::header(stamp, &format!("{}_optical_frame", self.camera));
         let image = match self.cfg.compressed {
-            None => Msg::Image(Arc::new(Image::from_image(header.clone(), img))),
-            Some((codec, quality)) => match xsurf_formats::compressed::encode(&img, codec, quality) {
+            None => Msg::Image(Arc::new(Image::from_image(header.clone(), f.image))),
+            Some((codec, quality)) => match xsurf_formats::compressed::encode(&f.image, codec, quality) {
                 Ok((format, data)) => {
                     Msg::CompressedImage(Arc::new(CompressedImage { header: header.clone(), format, data }))
                 }
@@ -361,159 +226,24 @@ impl CameraDriverNode {
                 }
             },
         };
-        out.publish(1, Msg::CameraInfo(Arc::new(convert::camera_info(model, header))));
-        out.publish(0, image);
+        out.publish(OUT_INFO, Msg::CameraInfo(Arc::new(convert::camera_info(&f.model, header))));
+        out.publish(OUT_IMAGE, image);
         self.frames += 1;
         self.tally.count(stamp);
     }
 
-    /// V4L2 source: opens the camera when due (again after a failure, every second), then
-    /// publishes every frame that arrived since the last tick.
-    fn poll_camera(&mut self, now_ns: i64, out: &mut Outbox) {
-        use crate::v4l2::{Capture, Captured};
-        let Source::V4l2 { device, offset_ns } = &self.cfg.source else { return };
-        let offset_ns = *offset_ns;
-        if self.capture.is_none() {
-            if now_ns < self.reopen_at {
-                return;
-            }
-            match Capture::open(
-                device,
-                self.cfg.width,
-                self.cfg.height,
-                1e9 / self.cfg.period_ns as f64,
-                self.cfg.encoding,
-            ) {
-                Ok(c) => {
-                    log::info!("camera_driver: {} streaming {}", device.display(), String::from_utf8_lossy(&c.fourcc));
-                    self.capture = Some(c);
-                }
-                Err(e) => {
-                    self.device_errors += 1;
-                    self.reopen_at = now_ns + 1_000_000_000;
-                    if self.device_errors <= 3 || self.device_errors.is_power_of_two() {
-                        log::error!("camera_driver: {e} (attempt {}; retrying every second)", self.device_errors);
-                    }
-                    return;
-                }
-            }
-        }
-        while let Some(item) = self.capture.as_ref().and_then(|c| c.try_next()) {
-            match item {
-                Captured::Frame(at, mut img) => {
-                    if self.cfg.rotate_180 {
-                        rotate_180(&mut img);
-                    }
-                    let Some(model) = model_for(&self.cfg, &self.camera, &mut self.rig_model, img.width, img.height)
-                    else {
-                        return;
-                    };
-                    self.publish_frame(at - offset_ns, &model, img, out);
-                }
-                Captured::Bad(e) => {
-                    self.read_errors += 1;
-                    log::warn!("camera_driver: {e}");
-                }
-                Captured::Ended(e) => {
-                    self.device_errors += 1;
-                    self.capture = None;
-                    self.reopen_at = now_ns + 1_000_000_000;
-                    log::error!("camera_driver: {e}; reopening in a second");
-                    return;
-                }
-            }
-        }
-    }
-
-    /// Files source: the next file of the sequence, for the frame slot `slot` (its stamp, unless
-    /// the timestamps file gives one).
-    fn file_frame(&mut self, slot: i64, out: &mut Outbox) {
-        let Source::Files { list, stamps, repeat } = &self.cfg.source else { return };
-        let mut i = self.next_file;
-        if i >= list.len() {
-            if !*repeat {
-                return;
-            }
-            i = 0;
-        }
-        self.next_file = i + 1;
-        let stamp = match stamps {
-            Some(s) => s[i],
-            None => slot,
+    /// The frames the source has now, published.
+    fn take_frames(&mut self, now_ns: i64, slot_ns: i64, out: &mut Outbox) {
+        let ctx = source::Context {
+            cfg: &self.cfg,
+            camera: &self.camera,
+            pose: self.pose_at(now_ns),
+            laser_on: self.laser_on,
+            frames: self.frames,
         };
-        if self.cache.len() != list.len() {
-            self.cache = vec![None; list.len()];
-            self.cache_bytes = 0;
+        for f in self.source.frames(now_ns, slot_ns, &ctx) {
+            self.publish_frame(f, out);
         }
-        let mut img = match self.cache[i].as_deref() {
-            Some(img) => img.clone(),
-            None => match xsurf_formats::frames::read_frame(&list[i]) {
-                Ok(img) => {
-                    if *repeat && self.cache_bytes + img.data.len() <= CACHE_BYTES {
-                        self.cache_bytes += img.data.len();
-                        self.cache[i] = Some(Arc::new(img.clone()));
-                    }
-                    img
-                }
-                Err(e) => {
-                    self.read_errors += 1;
-                    log::error!("camera_driver: {e}");
-                    return;
-                }
-            },
-        };
-        if self.cfg.rotate_180 {
-            rotate_180(&mut img);
-        }
-        let Some(model) = model_for(&self.cfg, &self.camera, &mut self.rig_model, img.width, img.height) else {
-            return;
-        };
-        if (model.width, model.height) != (img.width, img.height) {
-            self.read_errors += 1;
-            log::error!(
-                "camera_driver: {} is {}x{}, the calibration is for {}x{}",
-                list[i].display(),
-                img.width,
-                img.height,
-                model.width,
-                model.height
-            );
-            return;
-        }
-        let all_done = (self.next_file == list.len() && !*repeat).then_some(list.len());
-        self.publish_frame(stamp, &model, img, out);
-        if let Some(n) = all_done {
-            log::info!("camera_driver: all {n} frames published");
-        }
-    }
-
-    /// Synthetic source: what the camera sees at `now_ns` with the C-arm where `/tf` says.
-    fn synthetic_frame(&mut self, now_ns: i64, out: &mut Outbox) {
-        let Some(pose) = self.pose_at(now_ns) else { return };
-        let laser = self.laser_on;
-        let frame = self.frames;
-        let rotate = self.cfg.rotate_180;
-        let info = self.cfg.camera_info;
-        let (img, model) = match self.scanner() {
-            Ok((s, i)) => match s.rig.cameras[*i].model() {
-                Ok(m) => {
-                    let mut img = s.render_at(*i, &pose, laser, frame);
-                    if rotate {
-                        rotate_180(&mut img);
-                    }
-                    (img, info.unwrap_or(m))
-                }
-                Err(e) => {
-                    log::error!("camera_driver: {e}");
-                    return;
-                }
-            },
-            Err(e) => {
-                log::error!("camera_driver: {e}");
-                return;
-            }
-        };
-        self.publish_frame(now_ns, &model, img, out);
     }
 
     /// `table -> carm` at `t`, extrapolated linearly from the two newest samples.
@@ -559,8 +289,9 @@ impl Component for CameraDriverNode {
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         self.cfg = config(p)?;
-        self.scanner = None;
-        self.rig_model = None;
+        if !self.source.reconfigured(&self.cfg.source) {
+            self.source = source::build(&self.cfg.source);
+        }
         Ok(())
     }
     fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
@@ -599,7 +330,7 @@ impl Component for CameraDriverNode {
     /// The next frame's time, so that a frame leaves on time rather than at the host's next tick
     /// (a V4L2 camera keeps its own time: it is polled at the tick period).
     fn next_tick_ns(&self) -> Option<i64> {
-        if matches!(self.cfg.source, Source::V4l2 { .. }) {
+        if !self.source.paced() {
             return None;
         }
         self.next_ns
@@ -608,8 +339,8 @@ impl Component for CameraDriverNode {
         if let Some(report) = self.tally.due(now_ns) {
             out.publish(OUT_REPORT, report);
         }
-        if matches!(self.cfg.source, Source::V4l2 { .. }) {
-            self.poll_camera(now_ns, out);
+        if !self.source.paced() {
+            self.take_frames(now_ns, now_ns, out);
             return;
         }
         let next = *self.next_ns.get_or_insert(now_ns);
@@ -624,11 +355,7 @@ impl Component for CameraDriverNode {
         // the stamps fall behind the clock the C-arm's pose is on.
         let slot = next + behind * self.cfg.period_ns;
         self.next_ns = Some(slot + self.cfg.period_ns);
-        if matches!(self.cfg.source, Source::Files { .. }) {
-            self.file_frame(slot, out);
-        } else {
-            self.synthetic_frame(now_ns, out);
-        }
+        self.take_frames(now_ns, slot, out);
     }
     fn finish(&mut self, out: &mut Outbox) {
         if let Some(report) = self.tally.report() {
@@ -639,8 +366,8 @@ impl Component for CameraDriverNode {
         vec![
             ("frames", self.frames),
             ("frames_not_rendered_in_time", self.skipped),
-            ("read_errors", self.read_errors),
-            ("device_errors", self.device_errors),
+            ("read_errors", self.source.read_errors()),
+            ("device_errors", self.source.device_errors()),
             ("encode_errors", self.encode_errors),
         ]
     }
@@ -649,6 +376,7 @@ impl Component for CameraDriverNode {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use xsurf_core::synth::{LaserModel, ScanSettings, Scanner};
     use crate::registry::{build, declarations};
     use std::cell::RefCell;
     use std::rc::Rc;
