@@ -69,9 +69,9 @@ struct Config {
     carm_frame: String,
 }
 
-fn config(p: &Params) -> Result<Config, ParamError> {
-    let p = CameraDriverParams::from_params(p)?;
-    let source = match p.source {
+/// The source the parameters describe, its files listed and its stamps read.
+fn source_spec(p: &CameraDriverParams) -> Result<SourceSpec, ParamError> {
+    Ok(match p.source {
         SourceKind::Synthetic => SourceSpec::Synthetic,
         SourceKind::Files => {
             let list = source::files::frame_list(&p.files).map_err(|e| Params::invalid("files", e))?;
@@ -104,9 +104,14 @@ fn config(p: &Params) -> Result<Config, ParamError> {
             if !(0.0..=1.0).contains(&offset) {
                 return Err(Params::invalid("stamp_offset_s", format!("{offset:?} is not in [0, 1]")));
             }
-            SourceSpec::V4l2 { device: p.device.into(), offset_ns: (offset * 1e9).round() as i64 }
+            SourceSpec::V4l2 { device: (&p.device).into(), offset_ns: (offset * 1e9).round() as i64 }
         }
-    };
+    })
+}
+
+fn config(p: &Params) -> Result<Config, ParamError> {
+    let p = CameraDriverParams::from_params(p)?;
+    let source = source_spec(&p)?;
     let url = p.camera_info_url;
     let camera_info = if url.is_empty() {
         None
