@@ -27,26 +27,9 @@ pub struct PlayOptions {
     pub delay_s: f64,
 }
 
-/// Plays the bag; returns the number of messages published.
-pub fn play(dir: &Path, opts: &PlayOptions) -> anyhow::Result<u64> {
-    if !(opts.rate > 0.0 && opts.rate.is_finite()) {
-        bail!("--rate {} must be > 0", opts.rate);
-    }
-    let bag = Bag::open(dir)?;
-    let length_s = bag.metadata.duration_ns as f64 * 1e-9;
-    if !(opts.start_offset_s >= 0.0 && opts.start_offset_s.is_finite()) {
-        bail!("--start-offset {}: seconds from the bag's start, 0 or more", opts.start_offset_s);
-    }
-    if opts.start_offset_s > 0.0 && opts.start_offset_s >= length_s {
-        bail!(
-            "--start-offset {} s is past the end of {} ({length_s:.3} s long): nothing would be played",
-            opts.start_offset_s,
-            dir.display()
-        );
-    }
-    let env = DdsEnv::from_env(|k| std::env::var(k).ok())?;
-    let ctx = env.context()?;
-    let mut node = dds::tool_node(&ctx, "xsurf_bag_player")?;
+/// A publisher for each topic of the bag that is played (`--topics`, or all that xsurf knows),
+/// with the bag's QoS: a transient-local topic as static, a best-effort one as a camera stream.
+fn publishers(bag: &Bag, node: &mut dds::DdsNode, opts: &PlayOptions) -> anyhow::Result<BTreeMap<String, QosClass>> {
     let mut topics = BTreeMap::new();
     for t in &bag.metadata.topics {
         if !opts.topics.is_empty() && !opts.topics.contains(&t.name) {
@@ -69,6 +52,30 @@ pub fn play(dir: &Path, opts: &PlayOptions) -> anyhow::Result<u64> {
             bail!("topic {t} is not in the bag (or not playable)");
         }
     }
+    Ok(topics)
+}
+
+/// Plays the bag; returns the number of messages published.
+pub fn play(dir: &Path, opts: &PlayOptions) -> anyhow::Result<u64> {
+    if !(opts.rate > 0.0 && opts.rate.is_finite()) {
+        bail!("--rate {} must be > 0", opts.rate);
+    }
+    let bag = Bag::open(dir)?;
+    let length_s = bag.metadata.duration_ns as f64 * 1e-9;
+    if !(opts.start_offset_s >= 0.0 && opts.start_offset_s.is_finite()) {
+        bail!("--start-offset {}: seconds from the bag's start, 0 or more", opts.start_offset_s);
+    }
+    if opts.start_offset_s > 0.0 && opts.start_offset_s >= length_s {
+        bail!(
+            "--start-offset {} s is past the end of {} ({length_s:.3} s long): nothing would be played",
+            opts.start_offset_s,
+            dir.display()
+        );
+    }
+    let env = DdsEnv::from_env(|k| std::env::var(k).ok())?;
+    let ctx = env.context()?;
+    let mut node = dds::tool_node(&ctx, "xsurf_bag_player")?;
+    let topics = publishers(&bag, &mut node, opts)?;
     if opts.clock {
         node.add_publisher("/clock", "rosgraph_msgs/msg/Clock", QosClass::Reliable)?;
     }
