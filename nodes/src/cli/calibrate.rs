@@ -162,24 +162,16 @@ fn find_board(path: &Path, spec: &BoardSpec) -> Result<(Corners, (u32, u32)), St
     Ok((c, (img.width, img.height)))
 }
 
-fn cmd_intrinsics(args: &[String]) -> anyhow::Result<()> {
-    let o = Opts::parse(args, &["--board", "--square", "-o", "--out", "--name", "--model", "--report"], None)?;
-    let spec = o.board()?;
-    let out = output_file(o.get("-o").or(o.get("--out")).ok_or_else(|| usage("-o CAMERA.yaml is required"))?)?;
-    let m = o.get("--model").unwrap_or("plumb_bob");
-    let model = DistortionModel::parse(m)
-        .ok_or_else(|| usage(format!("--model {m}: expected plumb_bob or rational_polynomial")))?;
-    let name = o.get("--name").map(str::to_string).unwrap_or_else(|| {
-        out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "camera".into())
-    });
-    if o.positional.is_empty() {
-        return Err(usage("name the board images"));
-    }
+/// Each image's board: its corners (the images with a board of the first image's size),
+/// each image's index among those or why it is not used, and that size.
+type BoardSearch = (Vec<Vec<[f64; 2]>>, Vec<(PathBuf, Option<usize>, Option<String>)>, Option<(u32, u32)>);
+
+fn find_boards(paths: &[PathBuf], spec: &BoardSpec) -> BoardSearch {
     let mut found = Vec::new();
     let mut status: Vec<(PathBuf, Option<usize>, Option<String>)> = Vec::new();
     let mut size = None;
-    for path in &o.positional {
-        match find_board(path, &spec) {
+    for path in paths {
+        match find_board(path, spec) {
             Ok((c, s)) if size.is_none_or(|z| z == s) => {
                 size = Some(s);
                 status.push((path.clone(), Some(found.len()), None));
@@ -196,6 +188,76 @@ fn cmd_intrinsics(args: &[String]) -> anyhow::Result<()> {
             Err(e) => status.push((path.clone(), None, Some(e))),
         }
     }
+    (found, status, size)
+}
+
+/// The plots of an intrinsic calibration's report: RMS per image, residual vectors, and where
+/// the corners fell on the sensor.
+fn intrinsics_plots(
+    dir: &Path,
+    r: &intrinsics::IntrinsicsResult,
+    status: &[(PathBuf, Option<usize>, Option<String>)],
+    found: &[Vec<[f64; 2]>],
+    (w, h): (u32, u32),
+) -> anyhow::Result<()> {
+    // Per image RMS.
+    let n = status.len();
+    let top = r.views.iter().map(|v| v.rms_px).fold(0.1f64, f64::max) * 1.1;
+    let mut bars = Plot::new("REPROJECTION RMS PER IMAGE", "IMAGE", "PX", (-0.5, n as f64 - 0.5), (0.0, top));
+    for (k, (_, idx, _)) in status.iter().enumerate() {
+        match idx {
+            Some(i) => {
+                let v = &r.views[*i];
+                bars.bar(k as f64, 0.8, v.rms_px, if v.rejected.is_some() { RED } else { BLUE });
+            }
+            None => bars.bar(k as f64, 0.8, top, GREY),
+        }
+    }
+    bars.legend(0, "USED", BLUE);
+    bars.legend(1, "REJECTED", RED);
+    bars.legend(2, "NO BOARD", GREY);
+    bars.write_png(&dir.join("rms_per_image.png"))?;
+    // Residual vectors.
+    let lim = r
+        .views
+        .iter()
+        .filter(|v| v.rejected.is_none())
+        .flat_map(|v| v.residuals.iter().map(|d| d[0].abs().max(d[1].abs())))
+        .fold(0.2f64, f64::max)
+        * 1.1;
+    let mut sc = Plot::new("RESIDUALS (CIRCLE 0.2 PX)", "DU PX", "DV PX", (-lim, lim), (-lim, lim));
+    sc.circle(0.0, 0.0, 0.2, GREY);
+    for (i, v) in r.views.iter().enumerate().filter(|(_, v)| v.rejected.is_none()) {
+        for d in &v.residuals {
+            sc.dot(d[0], d[1], 1, palette(i));
+        }
+    }
+    sc.write_png(&dir.join("residuals.png"))?;
+    // Where the corners fell on the sensor: gaps mean distortion is not pinned there.
+    let mut cov = Plot::new("CORNERS ON THE SENSOR", "U PX", "V PX (DOWN)", (0.0, f64::from(w)), (-f64::from(h), 0.0));
+    for (i, pts) in found.iter().enumerate() {
+        for p in pts {
+            cov.dot(p[0], -p[1], 1, palette(i));
+        }
+    }
+    cov.write_png(&dir.join("coverage.png"))?;
+    Ok(())
+}
+
+fn cmd_intrinsics(args: &[String]) -> anyhow::Result<()> {
+    let o = Opts::parse(args, &["--board", "--square", "-o", "--out", "--name", "--model", "--report"], None)?;
+    let spec = o.board()?;
+    let out = output_file(o.get("-o").or(o.get("--out")).ok_or_else(|| usage("-o CAMERA.yaml is required"))?)?;
+    let m = o.get("--model").unwrap_or("plumb_bob");
+    let model = DistortionModel::parse(m)
+        .ok_or_else(|| usage(format!("--model {m}: expected plumb_bob or rational_polynomial")))?;
+    let name = o.get("--name").map(str::to_string).unwrap_or_else(|| {
+        out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "camera".into())
+    });
+    if o.positional.is_empty() {
+        return Err(usage("name the board images"));
+    }
+    let (found, status, size) = find_boards(&o.positional, &spec);
     for (p, _, why) in &status {
         if let Some(why) = why {
             println!("{}: not used: {why}", p.display());
@@ -262,47 +324,7 @@ fn cmd_intrinsics(args: &[String]) -> anyhow::Result<()> {
                 "distortion_model": m.distortion.to_ros().0, "d": m.distortion.to_ros().1,
                 "std_devs": r.std_devs, "rms_px": r.rms_px, "iterations": r.report.iterations, "images": images}),
     )?;
-    // Per image RMS.
-    let n = status.len();
-    let top = r.views.iter().map(|v| v.rms_px).fold(0.1f64, f64::max) * 1.1;
-    let mut bars = Plot::new("REPROJECTION RMS PER IMAGE", "IMAGE", "PX", (-0.5, n as f64 - 0.5), (0.0, top));
-    for (k, (_, idx, _)) in status.iter().enumerate() {
-        match idx {
-            Some(i) => {
-                let v = &r.views[*i];
-                bars.bar(k as f64, 0.8, v.rms_px, if v.rejected.is_some() { RED } else { BLUE });
-            }
-            None => bars.bar(k as f64, 0.8, top, GREY),
-        }
-    }
-    bars.legend(0, "USED", BLUE);
-    bars.legend(1, "REJECTED", RED);
-    bars.legend(2, "NO BOARD", GREY);
-    bars.write_png(&dir.join("rms_per_image.png"))?;
-    // Residual vectors.
-    let lim = r
-        .views
-        .iter()
-        .filter(|v| v.rejected.is_none())
-        .flat_map(|v| v.residuals.iter().map(|d| d[0].abs().max(d[1].abs())))
-        .fold(0.2f64, f64::max)
-        * 1.1;
-    let mut sc = Plot::new("RESIDUALS (CIRCLE 0.2 PX)", "DU PX", "DV PX", (-lim, lim), (-lim, lim));
-    sc.circle(0.0, 0.0, 0.2, GREY);
-    for (i, v) in r.views.iter().enumerate().filter(|(_, v)| v.rejected.is_none()) {
-        for d in &v.residuals {
-            sc.dot(d[0], d[1], 1, palette(i));
-        }
-    }
-    sc.write_png(&dir.join("residuals.png"))?;
-    // Where the corners fell on the sensor: gaps mean distortion is not pinned there.
-    let mut cov = Plot::new("CORNERS ON THE SENSOR", "U PX", "V PX (DOWN)", (0.0, f64::from(w)), (-f64::from(h), 0.0));
-    for (i, pts) in found.iter().enumerate() {
-        for p in pts {
-            cov.dot(p[0], -p[1], 1, palette(i));
-        }
-    }
-    cov.write_png(&dir.join("coverage.png"))?;
+    intrinsics_plots(&dir, &r, &status, &found, (w, h))?;
     println!("report: {}", dir.display());
     Ok(())
 }
