@@ -338,6 +338,75 @@ fn per_image_values(g: &Group, flag: &str) -> anyhow::Result<Vec<f64>> {
     }
 }
 
+/// One camera's placement from its board images at their travels: put in `rig`, its residuals
+/// plotted into `dir`; returns its entry of the report.
+fn place_camera(
+    g: &Group,
+    gi: usize,
+    spec: &BoardSpec,
+    board: &xsurf_core::geom::Iso3,
+    rig: &mut Rig,
+    dir: &Path,
+) -> anyhow::Result<serde_json::Value> {
+    let ipath =
+        g.intrinsics.as_ref().ok_or_else(|| usage(format!("--camera {}: --intrinsics is required", g.camera)))?;
+    let model: CameraModel = calibration::read(ipath)?.model().map_err(|e| anyhow!("{}: {e}", ipath.display()))?;
+    let travels = per_image_values(g, "--travels")?;
+    let mut views = Vec::new();
+    let mut files = Vec::new();
+    let mut reasons = String::new();
+    for (p, &t) in g.images.iter().zip(&travels) {
+        match find_board(p, spec) {
+            Ok((c, s)) if s == (model.width, model.height) => {
+                views.push(PlacementView { corners: c.points, table_from_carm: table_from_carm(t, 0.0, 0.0) });
+                files.push((p.clone(), t));
+            }
+            Ok((_, s)) => reasons.push_str(&format!(
+                "\n  {}: image is {}x{}, the intrinsics {}x{}",
+                p.display(),
+                s.0,
+                s.1,
+                model.width,
+                model.height
+            )),
+            Err(e) => reasons.push_str(&format!("\n  {}: {e}", p.display())),
+        }
+    }
+    if !reasons.is_empty() {
+        println!("{}: images not used:{reasons}", g.camera);
+    }
+    let r = placement::calibrate(spec, &model, board, &views)
+        .map_err(|e| anyhow!("placement of {}: {e}{reasons}", g.camera))?;
+    let t = r.carm_from_optical.translation;
+    let q = r.carm_from_optical.quaternion();
+    println!(
+        "{}: carm -> {}_optical_frame translation [{:.4}, {:.4}, {:.4}] m, rotation [{:.5}, {:.5}, {:.5}, {:.5}]; reprojection RMS {:.3} px over {} images",
+        g.camera, g.camera, t.x, t.y, t.z, q.x, q.y, q.z, q.w, r.rms_px, views.len()
+    );
+    let cam = RigCamera::from_parts(&g.camera, &model, &r.carm_from_optical);
+    match rig.cameras.iter_mut().find(|c| c.name == g.camera) {
+        Some(c) => *c = cam,
+        None => rig.cameras.push(cam),
+    }
+    let images: Vec<_> = files
+        .iter()
+        .zip(r.view_rms_px.iter().zip(&r.residuals))
+        .map(|((p, t), (rms, res))| json!({"file": p, "travel_m": t, "rms_px": rms, "residuals_px": res}))
+        .collect();
+    let entry = json!({"camera": g.camera, "intrinsics": ipath, "translation_m": [t.x, t.y, t.z],
+                       "rotation_xyzw": [q.x, q.y, q.z, q.w], "rms_px": r.rms_px, "images": images});
+    let lim = r.residuals.iter().flatten().map(|d| d[0].abs().max(d[1].abs())).fold(0.2f64, f64::max) * 1.1;
+    let mut sc = Plot::new(&format!("{} PLACEMENT RESIDUALS", g.camera), "DU PX", "DV PX", (-lim, lim), (-lim, lim));
+    sc.circle(0.0, 0.0, 0.2, GREY);
+    for (i, res) in r.residuals.iter().enumerate() {
+        for d in res {
+            sc.dot(d[0], d[1], 1, palette(i + gi));
+        }
+    }
+    sc.write_png(&dir.join(format!("{}_residuals.png", g.camera)))?;
+    Ok(entry)
+}
+
 fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
     let o = Opts::parse(
         args,
@@ -379,63 +448,7 @@ fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
     std::fs::create_dir_all(&dir).with_context(|| format!("report folder {}", dir.display()))?;
     let mut report = Vec::new();
     for (gi, g) in o.groups.iter().enumerate() {
-        let ipath =
-            g.intrinsics.as_ref().ok_or_else(|| usage(format!("--camera {}: --intrinsics is required", g.camera)))?;
-        let model: CameraModel = calibration::read(ipath)?.model().map_err(|e| anyhow!("{}: {e}", ipath.display()))?;
-        let travels = per_image_values(g, "--travels")?;
-        let mut views = Vec::new();
-        let mut files = Vec::new();
-        let mut reasons = String::new();
-        for (p, &t) in g.images.iter().zip(&travels) {
-            match find_board(p, &spec) {
-                Ok((c, s)) if s == (model.width, model.height) => {
-                    views.push(PlacementView { corners: c.points, table_from_carm: table_from_carm(t, 0.0, 0.0) });
-                    files.push((p.clone(), t));
-                }
-                Ok((_, s)) => reasons.push_str(&format!(
-                    "\n  {}: image is {}x{}, the intrinsics {}x{}",
-                    p.display(),
-                    s.0,
-                    s.1,
-                    model.width,
-                    model.height
-                )),
-                Err(e) => reasons.push_str(&format!("\n  {}: {e}", p.display())),
-            }
-        }
-        if !reasons.is_empty() {
-            println!("{}: images not used:{reasons}", g.camera);
-        }
-        let r = placement::calibrate(&spec, &model, &board, &views)
-            .map_err(|e| anyhow!("placement of {}: {e}{reasons}", g.camera))?;
-        let t = r.carm_from_optical.translation;
-        let q = r.carm_from_optical.quaternion();
-        println!(
-            "{}: carm -> {}_optical_frame translation [{:.4}, {:.4}, {:.4}] m, rotation [{:.5}, {:.5}, {:.5}, {:.5}]; reprojection RMS {:.3} px over {} images",
-            g.camera, g.camera, t.x, t.y, t.z, q.x, q.y, q.z, q.w, r.rms_px, views.len()
-        );
-        let cam = RigCamera::from_parts(&g.camera, &model, &r.carm_from_optical);
-        match rig.cameras.iter_mut().find(|c| c.name == g.camera) {
-            Some(c) => *c = cam,
-            None => rig.cameras.push(cam),
-        }
-        let images: Vec<_> = files
-            .iter()
-            .zip(r.view_rms_px.iter().zip(&r.residuals))
-            .map(|((p, t), (rms, res))| json!({"file": p, "travel_m": t, "rms_px": rms, "residuals_px": res}))
-            .collect();
-        report.push(json!({"camera": g.camera, "intrinsics": ipath, "translation_m": [t.x, t.y, t.z],
-                           "rotation_xyzw": [q.x, q.y, q.z, q.w], "rms_px": r.rms_px, "images": images}));
-        let lim = r.residuals.iter().flatten().map(|d| d[0].abs().max(d[1].abs())).fold(0.2f64, f64::max) * 1.1;
-        let mut sc =
-            Plot::new(&format!("{} PLACEMENT RESIDUALS", g.camera), "DU PX", "DV PX", (-lim, lim), (-lim, lim));
-        sc.circle(0.0, 0.0, 0.2, GREY);
-        for (i, res) in r.residuals.iter().enumerate() {
-            for d in res {
-                sc.dot(d[0], d[1], 1, palette(i + gi));
-            }
-        }
-        sc.write_png(&dir.join(format!("{}_residuals.png", g.camera)))?;
+        report.push(place_camera(g, gi, &spec, &board, &mut rig, &dir)?);
     }
     xsurf_formats::rig::write(
         &out,
