@@ -487,17 +487,16 @@ fn line_pixels(path: &Path) -> Result<Pixels, String> {
     Ok((px, (img.width, img.height)))
 }
 
-fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
-    let o = Opts::parse(args, &["-o", "--out", "--rig", "--report"], Some("--heights"))?;
-    let rig_path = PathBuf::from(o.need("--rig")?);
-    let mut rig = xsurf_formats::rig::read(&rig_path)?;
-    let out = output_file(o.get("-o").or(o.get("--out")).unwrap_or(o.need("--rig")?))?;
-    if o.groups.is_empty() {
-        return Err(usage("give at least one --camera NAME --heights H[,H...] IMAGE..."));
-    }
+/// The laser line's pixels of each image, with its camera's geometry from the rig and the
+/// tabletop height; and each image's file, camera and height.
+fn laser_views(
+    groups: &[Group],
+    rig: &Rig,
+    rig_path: &Path,
+) -> anyhow::Result<(Vec<LaserView>, Vec<(PathBuf, String, f64)>)> {
     let mut views = Vec::new();
     let mut files = Vec::new();
-    for g in &o.groups {
+    for g in groups {
         let cam = rig.camera(&g.camera).ok_or_else(|| {
             anyhow!("rig file {}: no camera {:?}; run `xsurf calibrate placement` first", rig_path.display(), g.camera)
         })?;
@@ -521,6 +520,18 @@ fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
             files.push((p.clone(), g.camera.clone(), h));
         }
     }
+    Ok((views, files))
+}
+
+fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
+    let o = Opts::parse(args, &["-o", "--out", "--rig", "--report"], Some("--heights"))?;
+    let rig_path = PathBuf::from(o.need("--rig")?);
+    let mut rig = xsurf_formats::rig::read(&rig_path)?;
+    let out = output_file(o.get("-o").or(o.get("--out")).unwrap_or(o.need("--rig")?))?;
+    if o.groups.is_empty() {
+        return Err(usage("give at least one --camera NAME --heights H[,H...] IMAGE..."));
+    }
+    let (views, files) = laser_views(&o.groups, &rig, &rig_path)?;
     let reference = Vec3::new(rig.laser_plane[0], rig.laser_plane[1], rig.laser_plane[2]);
     let r = laser::calibrate(&views, reference).map_err(|e| {
         // Name the files behind "view N".
