@@ -24,7 +24,7 @@ use xsurf_core::calib::placement::{self, table_from_board, PlacementView};
 use xsurf_core::camera::CameraModel;
 use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine};
 use xsurf_core::geom::Vec3;
-use xsurf_core::merge::refine::{RefinementFile, Status};
+use xsurf_core::merge::refine::{Record, RefinementFile, Status};
 use xsurf_core::pose::table_from_carm;
 use xsurf_core::rig::{Rig, RigCamera};
 use xsurf_core::synth::calib::{board_views, render_board, BoardLook, Exposure, RayTable};
@@ -487,13 +487,12 @@ fn line_pixels(path: &Path) -> Result<Pixels, String> {
     Ok((px, (img.width, img.height)))
 }
 
+/// An image of the laser calibration: its file, camera and tabletop height.
+type LaserFile = (PathBuf, String, f64);
+
 /// The laser line's pixels of each image, with its camera's geometry from the rig and the
 /// tabletop height; and each image's file, camera and height.
-fn laser_views(
-    groups: &[Group],
-    rig: &Rig,
-    rig_path: &Path,
-) -> anyhow::Result<(Vec<LaserView>, Vec<(PathBuf, String, f64)>)> {
+fn laser_views(groups: &[Group], rig: &Rig, rig_path: &Path) -> anyhow::Result<(Vec<LaserView>, Vec<LaserFile>)> {
     let mut views = Vec::new();
     let mut files = Vec::new();
     for g in groups {
@@ -595,6 +594,40 @@ fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
 /// input. The bag is reconstructed offline with the merger's refinement (triangulated with the
 /// rig's laser plane and the bag's `/tf_static`); the refined placements go into the rig. Exits
 /// with an error, the rig untouched, if any camera's refinement was refused.
+/// The refined placements of `cameras` put into `rig` (each printed); returns the cameras
+/// refused, with why.
+fn apply_refinements(cameras: &[Record], rig: &mut Rig, rig_path: &Path) -> anyhow::Result<Vec<String>> {
+    let mut refused = Vec::new();
+    for c in cameras {
+        let name = c.camera.as_str();
+        let (Status::Refined, Some(refined)) = (c.status, c.refined) else {
+            refused.push(format!("{name}: {}", c.reason));
+            continue;
+        };
+        let cam = rig
+            .cameras
+            .iter_mut()
+            .find(|rc| rc.name == name)
+            .ok_or_else(|| anyhow!("rig file {}: no camera {name:?} (the bag has it)", rig_path.display()))?;
+        cam.set_carm_from_optical(&refined.iso());
+        let [dx, dy, dz] = c.correction_m.unwrap_or_default();
+        let num = |v: Option<f64>| v.unwrap_or(f64::NAN);
+        println!(
+            "{name}: refined against {}: moved {:.2} mm / {:.3} deg; residual RMS {:.3} -> {:.3} mm over {} points, \
+             overlap {:.0} %, {} iterations",
+            c.reference,
+            (dx.powi(2) + dy.powi(2) + dz.powi(2)).sqrt() * 1e3,
+            num(c.correction_deg),
+            num(c.rms_before_m) * 1e3,
+            num(c.rms_after_m) * 1e3,
+            c.points.unwrap_or(0),
+            num(c.overlap_fraction) * 100.0,
+            c.iterations.unwrap_or(0)
+        );
+    }
+    Ok(refused)
+}
+
 fn cmd_scan(args: &[String]) -> anyhow::Result<()> {
     let o = Opts::parse(
         args,
@@ -641,34 +674,7 @@ fn cmd_scan(args: &[String]) -> anyhow::Result<()> {
     })?;
     let outcome: RefinementFile = serde_json::from_str(&text).with_context(|| format!("{}", refinement.display()))?;
     let cameras = outcome.cameras;
-    let mut refused = Vec::new();
-    for c in &cameras {
-        let name = c.camera.as_str();
-        let (Status::Refined, Some(refined)) = (c.status, c.refined) else {
-            refused.push(format!("{name}: {}", c.reason));
-            continue;
-        };
-        let cam = rig
-            .cameras
-            .iter_mut()
-            .find(|rc| rc.name == name)
-            .ok_or_else(|| anyhow!("rig file {}: no camera {name:?} (the bag has it)", rig_path.display()))?;
-        cam.set_carm_from_optical(&refined.iso());
-        let [dx, dy, dz] = c.correction_m.unwrap_or_default();
-        let num = |v: Option<f64>| v.unwrap_or(f64::NAN);
-        println!(
-            "{name}: refined against {}: moved {:.2} mm / {:.3} deg; residual RMS {:.3} -> {:.3} mm over {} points, \
-             overlap {:.0} %, {} iterations",
-            c.reference,
-            (dx.powi(2) + dy.powi(2) + dz.powi(2)).sqrt() * 1e3,
-            num(c.correction_deg),
-            num(c.rms_before_m) * 1e3,
-            num(c.rms_after_m) * 1e3,
-            c.points.unwrap_or(0),
-            num(c.overlap_fraction) * 100.0,
-            c.iterations.unwrap_or(0)
-        );
-    }
+    let refused = apply_refinements(&cameras, &mut rig, &rig_path)?;
     write_json(
         &dir.join("report.json"),
         &json!({"kind": "scan", "bag": bag, "scan_id": scan, "rig": out, "cameras": cameras,
