@@ -107,6 +107,49 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     })
 }
 
+/// The radiograph's overlay for rviz2: the placed grid as a triangle list, each vertex
+/// coloured by the windowed grey level under it (`grey`, `size` = width x height) and
+/// textured with the PNG.
+fn overlay_marker(
+    grid: &xsurf_core::xray::PlacedGrid,
+    grey: &[u8],
+    size: (u32, u32),
+    png: &[u8],
+    scan_id: u32,
+    header: xsurf_msgs::std_msgs::Header,
+) -> Marker {
+    let (w, h) = (size.0 as usize, size.1 as usize);
+    let sample = |uv: [f32; 2]| -> f32 {
+        let x = ((uv[0] * w as f32) as usize).min(w - 1);
+        let y = (((1.0 - uv[1]) * h as f32) as usize).min(h - 1);
+        f32::from(grey[y * w + x]) / 255.0
+    };
+    let mut m = Marker {
+        header: header.clone(),
+        ns: "xray".into(),
+        id: scan_id as i32,
+        type_: Marker::TRIANGLE_LIST,
+        action: Marker::ADD,
+        scale: Vector3 { x: 1.0, y: 1.0, z: 1.0 },
+        color: ColorRGBA { r: 1.0, g: 1.0, b: 1.0, a: 1.0 },
+        texture_resource: "embedded://xray.png".into(),
+        texture: CompressedImage { header, format: "png".into(), data: png.to_vec() },
+        ..Default::default()
+    };
+    m.pose.orientation.w = 1.0;
+    for t in &grid.triangles {
+        for &i in t {
+            let (p, uv) = (grid.positions[i as usize], grid.uv[i as usize]);
+            m.points.push(Point { x: p.x, y: p.y, z: p.z });
+            let g = sample(uv);
+            m.colors.push(ColorRGBA { r: g, g, b: g, a: 1.0 });
+            // rviz2 (Ogre) has v = 0 at the image's top.
+            m.uv_coordinates.push(UVCoordinate { u: uv[0], v: 1.0 - uv[1] });
+        }
+    }
+    m
+}
+
 /// A complete scan: its id and exposure window.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct ScanWindow {
@@ -297,36 +340,7 @@ impl XrayAlignerNode {
         let cropped = image.crop_columns(cols.clone());
         let grey = cropped.display(c.window);
         let png = encode_png(cropped.width, cropped.height, PngKind::Grey8, &grey).map_err(|e| e.to_string())?;
-        let (w, h) = (cropped.width as usize, cropped.height as usize);
-        let sample = |uv: [f32; 2]| -> f32 {
-            let x = ((uv[0] * w as f32) as usize).min(w - 1);
-            let y = (((1.0 - uv[1]) * h as f32) as usize).min(h - 1);
-            f32::from(grey[y * w + x]) / 255.0
-        };
-        let header = convert::header(start_ns, &c.frame_id);
-        let mut m = Marker {
-            header: header.clone(),
-            ns: "xray".into(),
-            id: scan_id as i32,
-            type_: Marker::TRIANGLE_LIST,
-            action: Marker::ADD,
-            scale: Vector3 { x: 1.0, y: 1.0, z: 1.0 },
-            color: ColorRGBA { r: 1.0, g: 1.0, b: 1.0, a: 1.0 },
-            texture_resource: "embedded://xray.png".into(),
-            texture: CompressedImage { header, format: "png".into(), data: png.clone() },
-            ..Default::default()
-        };
-        m.pose.orientation.w = 1.0;
-        for t in &grid.triangles {
-            for &i in t {
-                let (p, uv) = (grid.positions[i as usize], grid.uv[i as usize]);
-                m.points.push(Point { x: p.x, y: p.y, z: p.z });
-                let g = sample(uv);
-                m.colors.push(ColorRGBA { r: g, g, b: g, a: 1.0 });
-                // rviz2 (Ogre) has v = 0 at the image's top.
-                m.uv_coordinates.push(UVCoordinate { u: uv[0], v: 1.0 - uv[1] });
-            }
-        }
+        let m = overlay_marker(&grid, &grey, (cropped.width, cropped.height), &png, scan_id, convert::header(start_ns, &c.frame_id));
         let json = serde_json::json!({
             "scan_id": scan_id,
             "detector_columns": image.width,
