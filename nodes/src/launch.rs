@@ -395,76 +395,75 @@ fn terminate(r: &Running) {
     let _ = Command::new("kill").args(["-TERM", &r.child.id().to_string()]).status();
 }
 
-/// Starts the nodes and supervises them until they end or a signal arrives.
-pub fn run(nodes: &[NodeSpec], composed: bool) -> anyhow::Result<ExitCode> {
-    if nodes.is_empty() {
-        bail!("the launch file starts no node");
-    }
-    let dir = std::env::temp_dir().join(format!("xsurf-launch-{}", std::process::id()));
-    std::fs::create_dir_all(&dir)?;
-    let inline = inline_params_file(nodes, &dir)?;
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)).context("signal handler")?;
-    }
-    let mut running = Vec::new();
-    if composed {
-        let mut args: Vec<String> = vec!["compose".into()];
-        let mut ros: Vec<String> = vec!["--ros-args".into()];
-        for n in nodes {
-            let ty = Path::new(&n.exec).file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
-            if !n.args.is_empty() {
-                bail!("node {}: args are not supported with --composed", n.fq_name());
-            }
-            args.push(if ty == n.name { n.fq_name() } else { format!("{}={ty}", n.fq_name()) });
-            for f in &n.param_files {
-                ros.extend(["--params-file".into(), f.to_string_lossy().into_owned()]);
-            }
-            if !n.remaps.is_empty() && nodes.iter().filter(|o| o.name == n.name).count() > 1 {
-                bail!(
-                    "node {}: node-specific remaps cannot be told apart from another node named {} when composed",
-                    n.fq_name(),
-                    n.name
-                );
-            }
-            for (from, to) in &n.remaps {
-                ros.extend(["-r".into(), format!("{}:{from}:={to}", n.name)]);
-            }
-            ros.extend(n.ros_args.iter().cloned());
+/// `xsurf compose` with every node of the launch file: one process, started again if any node
+/// asks for respawn.
+fn start_composed(nodes: &[NodeSpec], inline: Option<&Path>) -> anyhow::Result<Running> {
+    let mut args: Vec<String> = vec!["compose".into()];
+    let mut ros: Vec<String> = vec!["--ros-args".into()];
+    for n in nodes {
+        let ty = Path::new(&n.exec).file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+        if !n.args.is_empty() {
+            bail!("node {}: args are not supported with --composed", n.fq_name());
         }
-        if let Some(f) = &inline {
+        args.push(if ty == n.name { n.fq_name() } else { format!("{}={ty}", n.fq_name()) });
+        for f in &n.param_files {
             ros.extend(["--params-file".into(), f.to_string_lossy().into_owned()]);
         }
-        let exe = std::env::current_exe()?;
-        let command = move || {
-            let mut cmd = Command::new(&exe);
-            cmd.args(&args).args(&ros);
-            cmd
+        if !n.remaps.is_empty() && nodes.iter().filter(|o| o.name == n.name).count() > 1 {
+            bail!(
+                "node {}: node-specific remaps cannot be told apart from another node named {} when composed",
+                n.fq_name(),
+                n.name
+            );
+        }
+        for (from, to) in &n.remaps {
+            ros.extend(["-r".into(), format!("{}:{from}:={to}", n.name)]);
+        }
+        ros.extend(n.ros_args.iter().cloned());
+    }
+    if let Some(f) = inline {
+        ros.extend(["--params-file".into(), f.to_string_lossy().into_owned()]);
+    }
+    let exe = std::env::current_exe()?;
+    let command = move || {
+        let mut cmd = Command::new(&exe);
+        cmd.args(&args).args(&ros);
+        cmd
+    };
+    let mut r = spawn("xsurf compose", command())?;
+    // Composed, the one process hosts every node: it is started again if any node asks.
+    r.respawn =
+        nodes.iter().filter_map(|n| n.respawn).max().map(|d| (d, Box::new(command) as Box<dyn Fn() -> Command>));
+    Ok(r)
+}
+
+/// Each node of the launch file as a process of its own; a node that cannot be started stops
+/// the ones already started.
+fn start_each(nodes: &[NodeSpec], inline: Option<&Path>) -> anyhow::Result<Vec<Running>> {
+    let mut running = Vec::new();
+    for n in nodes {
+        let command = {
+            let (n, inline) = (n.clone(), inline.map(Path::to_path_buf));
+            move || node_command(&n, inline.as_deref())
         };
-        let mut r = spawn("xsurf compose", command())?;
-        // Composed, the one process hosts every node: it is started again if any node asks.
-        r.respawn =
-            nodes.iter().filter_map(|n| n.respawn).max().map(|d| (d, Box::new(command) as Box<dyn Fn() -> Command>));
-        running.push(r);
-    } else {
-        for n in nodes {
-            let command = {
-                let (n, inline) = (n.clone(), inline.clone());
-                move || node_command(&n, inline.as_deref())
-            };
-            match spawn(&n.fq_name(), command()) {
-                Ok(mut r) => {
-                    r.respawn = n.respawn.map(|d| (d, Box::new(command) as Box<dyn Fn() -> Command>));
-                    running.push(r);
-                }
-                Err(e) => {
-                    running.iter().for_each(terminate);
-                    return Err(e);
-                }
+        match spawn(&n.fq_name(), command()) {
+            Ok(mut r) => {
+                r.respawn = n.respawn.map(|d| (d, Box::new(command) as Box<dyn Fn() -> Command>));
+                running.push(r);
+            }
+            Err(e) => {
+                running.iter().for_each(terminate);
+                return Err(e);
             }
         }
     }
+    Ok(running)
+}
+
+/// Watches the processes until all have ended: respawns those that ask for it (not one whose
+/// command line or parameters are refused, exit 2), stops the others when one fails or a signal
+/// arrives, and kills what has not stopped 10 s after SIGTERM. True if anything failed.
+fn supervise(running: &mut [Running], stop: &AtomicBool) -> bool {
     let mut failed = false;
     let mut stopping_since: Option<Instant> = None;
     loop {
@@ -535,6 +534,25 @@ pub fn run(nodes: &[NodeSpec], composed: bool) -> anyhow::Result<ExitCode> {
         }
         std::thread::sleep(Duration::from_millis(50));
     }
+    failed
+}
+
+/// Starts the nodes and supervises them until they end or a signal arrives.
+pub fn run(nodes: &[NodeSpec], composed: bool) -> anyhow::Result<ExitCode> {
+    if nodes.is_empty() {
+        bail!("the launch file starts no node");
+    }
+    let dir = std::env::temp_dir().join(format!("xsurf-launch-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let inline = inline_params_file(nodes, &dir)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)).context("signal handler")?;
+    }
+    let mut running =
+        if composed { vec![start_composed(nodes, inline.as_deref())?] } else { start_each(nodes, inline.as_deref())? };
+    let failed = supervise(&mut running, &stop);
     let _ = std::fs::remove_dir_all(&dir);
     let unclean = running.iter().any(|r| r.status.is_some_and(|s| !s.success()));
     Ok(if failed || unclean { ExitCode::from(1) } else { ExitCode::SUCCESS })
