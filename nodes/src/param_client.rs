@@ -53,6 +53,30 @@ fn call<Req: Message + 'static, Resp: Message + 'static>(
     })
 }
 
+/// After `timeout` without an answer, says so and exits 1 (a thread of its own, so the call
+/// that waits needs no timeout); after `QUIET`, says what it is waiting for.
+fn give_up_after(timeout: Duration, node_name: &str, env: &DdsEnv) -> anyhow::Result<()> {
+    let target = node_name.to_string();
+    let (domain, scope) = (env.domain_id, if env.localhost_only { "localhost only" } else { "all interfaces" });
+    std::thread::Builder::new().name("waiting note".into()).spawn(move || {
+        std::thread::sleep(QUIET.min(timeout));
+        if timeout > QUIET {
+            eprintln!(
+                "xsurf: waiting for the parameter services of {target} (ROS_DOMAIN_ID {domain}, {scope}; up to {:.0} s more)",
+                (timeout - QUIET).as_secs_f64()
+            );
+            std::thread::sleep(timeout - QUIET);
+        }
+        eprintln!(
+            "xsurf: error: no answer from the parameter services of {target} within {:.0} s: is the node running, \
+             in ROS_DOMAIN_ID {domain}? (`--timeout S` waits longer)",
+            timeout.as_secs_f64()
+        );
+        std::process::exit(1);
+    })?;
+    Ok(())
+}
+
 /// Runs `param` with its arguments (`--timeout S` anywhere: how long to wait for the node);
 /// prints the answer on stdout.
 pub fn run(args: &[String]) -> anyhow::Result<()> {
@@ -90,24 +114,7 @@ pub fn run(args: &[String]) -> anyhow::Result<()> {
         .map_err(|e| anyhow!("node: {e:?}"))?;
     let spinner = node.spinner().map_err(|e| anyhow!("spinner: {e:?}"))?;
     std::thread::Builder::new().name("spinner".into()).spawn(move || futures::executor::block_on(spinner.spin()))?;
-    let target = node_name.to_string();
-    let (domain, scope) = (env.domain_id, if env.localhost_only { "localhost only" } else { "all interfaces" });
-    std::thread::Builder::new().name("waiting note".into()).spawn(move || {
-        std::thread::sleep(QUIET.min(timeout));
-        if timeout > QUIET {
-            eprintln!(
-                "xsurf: waiting for the parameter services of {target} (ROS_DOMAIN_ID {domain}, {scope}; up to {:.0} s more)",
-                (timeout - QUIET).as_secs_f64()
-            );
-            std::thread::sleep(timeout - QUIET);
-        }
-        eprintln!(
-            "xsurf: error: no answer from the parameter services of {target} within {:.0} s: is the node running, \
-             in ROS_DOMAIN_ID {domain}? (`--timeout S` waits longer)",
-            timeout.as_secs_f64()
-        );
-        std::process::exit(1);
-    })?;
+    give_up_after(timeout, node_name, &env)?;
     match (verb, rest) {
         ("list", []) => {
             let c = client::<ListParametersRequest, ListParametersResponse>(
