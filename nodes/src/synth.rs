@@ -143,28 +143,19 @@ pub fn write_bag(
     }
 }
 
-fn write_bag_into(
-    dir: &Path,
-    stem: &str,
-    scanner: &Scanner,
-    zstd: bool,
-    scan_id: u32,
-    compressed: Option<(Codec, u8)>,
-    mut progress: impl FnMut(u32, u32),
-) -> anyhow::Result<SynthSummary> {
-    let rig = &scanner.rig;
-    let mut w = BagWriter::create_with_stem(dir, stem, BagOptions { zstd })?;
+/// The bag's topics: each camera's images (raw or compressed) and camera_info, `/tf`,
+/// `/tf_static`, `/joint_states` and the scan events.
+fn add_topics(w: &mut BagWriter, rig: &xsurf_core::rig::Rig, compressed: bool) -> anyhow::Result<()> {
     for c in &rig.cameras {
-        match compressed {
-            None => {
-                w.add_topic(&format!("/{}/image_raw", c.name), Image::TYPE_NAME, &Image::definition(), &Qos::SENSOR)?
-            }
-            Some(_) => w.add_topic(
+        if compressed {
+            w.add_topic(
                 &format!("/{}/image_raw/compressed", c.name),
                 CompressedImage::TYPE_NAME,
                 &CompressedImage::definition(),
                 &Qos::SENSOR,
-            )?,
+            )?;
+        } else {
+            w.add_topic(&format!("/{}/image_raw", c.name), Image::TYPE_NAME, &Image::definition(), &Qos::SENSOR)?;
         }
         w.add_topic(
             &format!("/{}/camera_info", c.name),
@@ -177,7 +168,13 @@ fn write_bag_into(
     w.add_topic("/tf_static", TFMessage::TYPE_NAME, &TFMessage::definition(), &Qos::STATIC)?;
     w.add_topic("/joint_states", JointState::TYPE_NAME, &JointState::definition(), &Qos::RELIABLE)?;
     w.add_topic("/scan/events", ScanEvent::TYPE_NAME, &ScanEvent::definition(), &Qos::RELIABLE)?;
+    Ok(())
+}
 
+/// What the bag holds, in the order of its log times: the C-arm's poses at `POSE_RATE_HZ` over
+/// the scan and a margin, each frame (logged `IMAGE_LATENCY_NS` after its exposure), and START
+/// and END; with the START and END stamps.
+fn schedule(scanner: &Scanner) -> (Vec<(i64, Item)>, i64, i64) {
     let n = scanner.frame_count();
     let t0 = scanner.settings.start_stamp_ns;
     let margin = 0.1;
@@ -196,6 +193,24 @@ fn write_bag_into(
     items.push((start, Item::Event(start, ScanEvent::START)));
     items.push((end + IMAGE_LATENCY_NS + 1, Item::Event(end, ScanEvent::END)));
     items.sort_by_key(|(t, _)| *t);
+
+    (items, start, end)
+}
+
+fn write_bag_into(
+    dir: &Path,
+    stem: &str,
+    scanner: &Scanner,
+    zstd: bool,
+    scan_id: u32,
+    compressed: Option<(Codec, u8)>,
+    mut progress: impl FnMut(u32, u32),
+) -> anyhow::Result<SynthSummary> {
+    let rig = &scanner.rig;
+    let mut w = BagWriter::create_with_stem(dir, stem, BagOptions { zstd })?;
+    add_topics(&mut w, rig, compressed.is_some())?;
+    let n = scanner.frame_count();
+    let (items, start, end) = schedule(scanner);
 
     // Static transforms first, at the start.
     let statics = TFMessage {
