@@ -41,113 +41,158 @@ pub fn zipper(mesh: &mut Mesh, camera: &[u8], max_edge_m: f32, min_angle_deg: f3
     }
     // Directed edges a -> b per vertex, with the triangle's third vertex.
     let (start, out) = mesh.corners();
-    let has_edge = |a: u32, b: u32| out[start[a as usize]..start[a as usize + 1]].iter().any(|e| e.0 == b);
-    // Boundary edges (a -> b with no b -> a), and the boundary vertices.
-    let mut boundary: Vec<(u32, u32, u32)> = Vec::new();
-    let mut on_boundary = vec![false; n];
-    for a in 0..n as u32 {
-        for &(b, opp) in &out[start[a as usize]..start[a as usize + 1]] {
-            if !has_edge(b, a) {
-                boundary.push((a, b, opp));
-                on_boundary[a as usize] = true;
-                on_boundary[b as usize] = true;
-            }
-        }
-    }
+    let mut seams = Seams {
+        p: &mesh.positions,
+        camera,
+        start: &start,
+        out: &out,
+        max_edge_m,
+        sin_min: min_angle_deg.to_radians().sin(),
+        used: HashSet::new(),
+        added: Vec::new(),
+    };
+    let (boundary, on_boundary) = seams.boundary();
     report.boundary_edges = boundary.len();
-    let p = &mesh.positions;
-    let indexed: Vec<[f32; 3]> = p.iter().zip(&on_boundary).map(|(q, &b)| if b { *q } else { [f32::NAN; 3] }).collect();
-    let cells = Cells::new(&indexed, max_edge_m);
-    let sin_min = min_angle_deg.to_radians().sin();
-    // Bridges: from each boundary edge of a lower-numbered camera to the best boundary vertex of
-    // a higher-numbered one on the far side of the edge. `links` records the new edges.
-    let mut added: Vec<[u32; 3]> = Vec::new();
-    let mut links: Vec<(u32, u32)> = Vec::new();
-    // Directed edges of the added triangles: a new triangle may not repeat any (it would
-    // overlap a neighbour or flip against it).
-    let mut used: HashSet<(u32, u32)> = HashSet::new();
-    let free = |used: &HashSet<(u32, u32)>, [x, y, z]: [u32; 3]| {
-        [(x, y), (y, z), (z, x)].iter().all(|&(u, v)| !has_edge(u, v) && !used.contains(&(u, v)))
-    };
-    let add = |used: &mut HashSet<(u32, u32)>, [x, y, z]: [u32; 3]| {
-        used.extend([(x, y), (y, z), (z, x)]);
-        [x, y, z]
-    };
-    for &(a, b, opp) in &boundary {
-        if camera[b as usize] != camera[a as usize] {
-            continue;
-        }
-        let (pa, pb) = (p[a as usize], p[b as usize]);
-        let normal = cross(sub(pb, pa), sub(p[opp as usize], pa));
-        let mid = [0, 1, 2].map(|k| (pa[k] + pb[k]) / 2.0);
-        let mut best: Option<(f32, u32)> = None;
-        cells.within(&mid, max_edge_m, |c, _| {
-            if camera[c as usize] <= camera[a as usize] {
-                return;
-            }
-            let tri = [b, a, c];
-            let pc = p[c as usize];
-            if dot(cross(sub(pa, pb), sub(pc, pb)), normal) <= 0.0
-                || !acceptable(p, tri, max_edge_m, sin_min)
-                || !free(&used, tri)
-            {
-                return;
-            }
-            let cost = norm(sub(pc, pa)) + norm(sub(pc, pb));
-            if best.is_none_or(|(bc, _)| cost < bc) {
-                best = Some((cost, c));
-            }
-        });
-        if let Some((_, c)) = best {
-            added.push(add(&mut used, [b, a, c]));
-            links.push((a, c));
-            links.push((b, c));
-            report.bridges += 1;
-        }
-    }
-    // Closings: a boundary edge d -> e of the higher-numbered camera whose ends both got a bridge
-    // to one vertex v closes the fan with (e, d, v).
-    // Both directions, sorted: the vertices bridged to x are the run of (x, _).
-    let mut links: Vec<(u32, u32)> = links.iter().flat_map(|&(x, y)| [(x, y), (y, x)]).collect();
-    links.sort_unstable();
-    links.dedup();
-    let linked = |x: u32, y: u32| links.binary_search(&(x, y)).is_ok();
-    let bridged_to = |x: u32| {
-        let from = links.partition_point(|&(a, _)| a < x);
-        links[from..].iter().take_while(move |&&(a, _)| a == x).map(|&(_, b)| b)
-    };
-    for &(d, e, opp) in &boundary {
-        let cam = camera[d as usize];
-        if camera[e as usize] != cam {
-            continue;
-        }
-        // A vertex bridged to both ends closes a fan; at the end of a seam, one bridged to
-        // either end (on the far side of the edge) closes the last gap.
-        let (pd, pe) = (p[d as usize], p[e as usize]);
-        let normal = cross(sub(pe, pd), sub(p[opp as usize], pd));
-        let mut best: Option<(bool, f32, u32)> = None;
-        for v in bridged_to(d).chain(bridged_to(e)) {
-            let pv = p[v as usize];
-            if camera[v as usize] >= cam
-                || dot(cross(sub(pd, pe), sub(pv, pe)), normal) <= 0.0
-                || !acceptable(p, [e, d, v], max_edge_m, sin_min)
-                || !free(&used, [e, d, v])
-            {
-                continue;
-            }
-            let both = linked(d, v) && linked(e, v);
-            let cost = norm(sub(pv, pd)) + norm(sub(pv, pe));
-            if best.is_none_or(|(b2, c2, _)| (both, -cost) > (b2, -c2)) {
-                best = Some((both, cost, v));
-            }
-        }
-        if let Some((_, _, v)) = best {
-            added.push(add(&mut used, [e, d, v]));
-            report.closings += 1;
-        }
-    }
+    let links = seams.bridges(&boundary, &on_boundary);
+    report.bridges = seams.added.len();
+    report.closings = seams.closings(&boundary, links);
+    let added = seams.added;
     mesh.add_triangles(added);
     report
+}
+
+/// The zipper's work: the mesh's positions, cameras and directed edges, and the triangles
+/// added so far with their directed edges (a new triangle may not repeat any: it would overlap
+/// a neighbour or flip against it).
+struct Seams<'a> {
+    p: &'a [[f32; 3]],
+    camera: &'a [u8],
+    /// `out[start[a]..start[a + 1]]`: the directed edges a -> b, with the third vertex.
+    start: &'a [usize],
+    out: &'a [(u32, u32)],
+    max_edge_m: f32,
+    sin_min: f32,
+    used: HashSet<(u32, u32)>,
+    added: Vec<[u32; 3]>,
+}
+
+impl Seams<'_> {
+    fn has_edge(&self, a: u32, b: u32) -> bool {
+        self.out[self.start[a as usize]..self.start[a as usize + 1]].iter().any(|e| e.0 == b)
+    }
+
+    /// Boundary edges `(a, b, third vertex)`, a -> b with no b -> a; and which vertices are on
+    /// the boundary.
+    fn boundary(&self) -> (Vec<(u32, u32, u32)>, Vec<bool>) {
+        let n = self.p.len();
+        let mut boundary: Vec<(u32, u32, u32)> = Vec::new();
+        let mut on_boundary = vec![false; n];
+        for a in 0..n as u32 {
+            for &(b, opp) in &self.out[self.start[a as usize]..self.start[a as usize + 1]] {
+                if !self.has_edge(b, a) {
+                    boundary.push((a, b, opp));
+                    on_boundary[a as usize] = true;
+                    on_boundary[b as usize] = true;
+                }
+            }
+        }
+        (boundary, on_boundary)
+    }
+
+    /// True if triangle `t` passes the mesher's test and repeats no directed edge.
+    fn fits(&self, t: [u32; 3]) -> bool {
+        let [x, y, z] = t;
+        acceptable(self.p, t, self.max_edge_m, self.sin_min)
+            && [(x, y), (y, z), (z, x)].iter().all(|&(u, v)| !self.has_edge(u, v) && !self.used.contains(&(u, v)))
+    }
+
+    fn add(&mut self, [x, y, z]: [u32; 3]) {
+        self.used.extend([(x, y), (y, z), (z, x)]);
+        self.added.push([x, y, z]);
+    }
+
+    /// Bridges: from each boundary edge of a lower-numbered camera to the best boundary vertex
+    /// of a higher-numbered one on the far side of the edge. Returns the new edges.
+    fn bridges(&mut self, boundary: &[(u32, u32, u32)], on_boundary: &[bool]) -> Vec<(u32, u32)> {
+        let (p, camera, max_edge_m) = (self.p, self.camera, self.max_edge_m);
+        let indexed: Vec<[f32; 3]> =
+            p.iter().zip(on_boundary).map(|(q, &b)| if b { *q } else { [f32::NAN; 3] }).collect();
+        let cells = Cells::new(&indexed, max_edge_m);
+        let mut links: Vec<(u32, u32)> = Vec::new();
+        for &(a, b, opp) in boundary {
+            if camera[b as usize] != camera[a as usize] {
+                continue;
+            }
+            let (pa, pb) = (p[a as usize], p[b as usize]);
+            let normal = cross(sub(pb, pa), sub(p[opp as usize], pa));
+            let mid = [0, 1, 2].map(|k| (pa[k] + pb[k]) / 2.0);
+            let mut best: Option<(f32, u32)> = None;
+            cells.within(&mid, max_edge_m, |c, _| {
+                if camera[c as usize] <= camera[a as usize] {
+                    return;
+                }
+                let pc = p[c as usize];
+                if dot(cross(sub(pa, pb), sub(pc, pb)), normal) <= 0.0 || !self.fits([b, a, c]) {
+                    return;
+                }
+                let cost = norm(sub(pc, pa)) + norm(sub(pc, pb));
+                if best.is_none_or(|(bc, _)| cost < bc) {
+                    best = Some((cost, c));
+                }
+            });
+            if let Some((_, c)) = best {
+                self.add([b, a, c]);
+                links.push((a, c));
+                links.push((b, c));
+            }
+        }
+        links
+    }
+
+    /// Closings: a boundary edge d -> e of the higher-numbered camera whose ends both got a
+    /// bridge to one vertex v closes the fan with (e, d, v); at the end of a seam, one bridged
+    /// to either end (on the far side of the edge) closes the last gap. Returns how many.
+    fn closings(&mut self, boundary: &[(u32, u32, u32)], links: Vec<(u32, u32)>) -> usize {
+        let (p, camera) = (self.p, self.camera);
+        // Both directions, sorted: the vertices bridged to x are the run of (x, _).
+        let mut links: Vec<(u32, u32)> = links.iter().flat_map(|&(x, y)| [(x, y), (y, x)]).collect();
+        links.sort_unstable();
+        links.dedup();
+        let linked = |x: u32, y: u32| links.binary_search(&(x, y)).is_ok();
+        let bridged_to = |x: u32| {
+            let from = links.partition_point(|&(a, _)| a < x);
+            links[from..].iter().take_while(move |&&(a, _)| a == x).map(|&(_, b)| b)
+        };
+        let mut closings = 0;
+        for &(d, e, opp) in boundary {
+            let cam = camera[d as usize];
+            if camera[e as usize] != cam {
+                continue;
+            }
+            let (pd, pe) = (p[d as usize], p[e as usize]);
+            let normal = cross(sub(pe, pd), sub(p[opp as usize], pd));
+            let mut best: Option<(bool, f32, u32)> = None;
+            for v in bridged_to(d).chain(bridged_to(e)) {
+                let pv = p[v as usize];
+                if camera[v as usize] >= cam
+                    || dot(cross(sub(pd, pe), sub(pv, pe)), normal) <= 0.0
+                    || !self.fits([e, d, v])
+                {
+                    continue;
+                }
+                let both = linked(d, v) && linked(e, v);
+                let cost = norm(sub(pv, pd)) + norm(sub(pv, pe));
+                if best.is_none_or(|(b2, c2, _)| (both, -cost) > (b2, -c2)) {
+                    best = Some((both, cost, v));
+                }
+            }
+            if let Some((_, _, v)) = best {
+                self.add([e, d, v]);
+                closings += 1;
+            }
+        }
+        closings
+    }
 }
 
 #[cfg(test)]
