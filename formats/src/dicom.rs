@@ -182,17 +182,14 @@ fn check_lengths(b: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
-/// Reads the radiograph in `path`.
-pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
-    let err = |what: String| DicomError { file: path.to_path_buf(), what };
-    if let Some(why) = crate::file_problem(path) {
-        return Err(err(why));
-    }
+/// The 128-byte preamble and "DICM" of a DICOM file (PS3.10 7.1); what the file is instead,
+/// if it is a common image format.
+fn check_preamble(path: &Path) -> Result<(), String> {
     // A DICOM file (PS3.10) is a 128-byte preamble and "DICM" before its meta group.
     let mut head = Vec::with_capacity(132);
     std::fs::File::open(path)
         .and_then(|f| std::io::Read::read_to_end(&mut std::io::Read::take(f, 132), &mut head))
-        .map_err(|e| err(e.to_string()))?;
+        .map_err(|e| e.to_string())?;
     let n = head.len();
     if n < 132 || &head[128..132] != b"DICM" {
         let kind = match &head[..n.min(8)] {
@@ -202,10 +199,64 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
             _ => "",
         };
         let end = if n < 132 { format!(" (the file ends at byte {n})") } else { String::new() };
-        return Err(err(format!(
+        return Err(format!(
             "not a DICOM file{kind}: the \"DICM\" prefix at byte offset 128 (PS3.10 7.1) is missing{end}"
-        )));
+        ));
     }
+    Ok(())
+}
+
+/// The pixels of `data` as u16, keeping only the stored bits (sign-extended for signed data,
+/// then offset by 32768 into u16; the caller moves the offset into the rescale intercept).
+fn stored_pixels(
+    data: &[u8],
+    (rows, cols): (u32, u32),
+    bits_allocated: u32,
+    bits_stored: u32,
+    signed: bool,
+) -> Result<Vec<u16>, String> {
+    let n = rows as usize * cols as usize;
+    let mut pixels: Vec<u16> = if bits_allocated == 16 {
+        if data.len() < 2 * n {
+            return Err(format!(
+                "{} holds {} bytes, {rows}x{cols} 16-bit pixels need {}",
+                name_of(tags::PIXEL_DATA),
+                data.len(),
+                2 * n
+            ));
+        }
+        data[..2 * n].chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]])).collect()
+    } else {
+        if data.len() < n {
+            return Err(format!(
+                "{} holds {} bytes, {rows}x{cols} 8-bit pixels need {n}",
+                name_of(tags::PIXEL_DATA),
+                data.len()
+            ));
+        }
+        data[..n].iter().map(|&b| u16::from(b)).collect()
+    };
+    // Keep only the stored bits (sign-extended for signed data), then offset signed values into
+    // u16 and move the offset into the rescale intercept.
+    let shift = 16 - bits_stored.min(16);
+    for p in &mut pixels {
+        *p = if signed {
+            let v = ((*p << shift) as i16) >> shift;
+            (i32::from(v) + 32768) as u16
+        } else {
+            (*p << shift) >> shift
+        };
+    }
+    Ok(pixels)
+}
+
+/// Reads the radiograph in `path`.
+pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
+    let err = |what: String| DicomError { file: path.to_path_buf(), what };
+    if let Some(why) = crate::file_problem(path) {
+        return Err(err(why));
+    }
+    check_preamble(path).map_err(err)?;
     let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
     check_lengths(&bytes).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;
     let obj = OpenFileOptions::new().open_file(path).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;
@@ -289,41 +340,9 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
         )));
     }
     let px = obj.decode_pixel_data().map_err(|e| err(format!("{}: {e}", name_of(tags::PIXEL_DATA))))?;
-    let n = rows as usize * cols as usize;
     let signed = matches!(px.pixel_representation(), dicom_pixeldata::PixelRepresentation::Signed);
-    let data = px.data();
-    let mut pixels: Vec<u16> = if bits_allocated == 16 {
-        if data.len() < 2 * n {
-            return Err(err(format!(
-                "{} holds {} bytes, {rows}x{cols} 16-bit pixels need {}",
-                name_of(tags::PIXEL_DATA),
-                data.len(),
-                2 * n
-            )));
-        }
-        data[..2 * n].chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]])).collect()
-    } else {
-        if data.len() < n {
-            return Err(err(format!(
-                "{} holds {} bytes, {rows}x{cols} 8-bit pixels need {n}",
-                name_of(tags::PIXEL_DATA),
-                data.len()
-            )));
-        }
-        data[..n].iter().map(|&b| u16::from(b)).collect()
-    };
-    // Keep only the stored bits (sign-extended for signed data), then offset signed values into
-    // u16 and move the offset into the rescale intercept.
-    let shift = 16 - bits_stored.min(16);
     let intercept_offset = if signed { -32768.0 } else { 0.0 };
-    for p in &mut pixels {
-        *p = if signed {
-            let v = ((*p << shift) as i16) >> shift;
-            (i32::from(v) + 32768) as u16
-        } else {
-            (*p << shift) >> shift
-        };
-    }
+    let pixels = stored_pixels(px.data(), (rows, cols), bits_allocated, bits_stored, signed).map_err(err)?;
     let rescale = px.rescale().ok().and_then(|r| r.first().copied());
     let (slope, intercept) = rescale.map_or((1.0, 0.0), |r| (r.slope, r.intercept));
     let window = px
