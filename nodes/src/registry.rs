@@ -6,7 +6,7 @@
 //! from the same entries.
 
 use xsurf_runtime::component::Component;
-use xsurf_runtime::params::{ParamDecl, ParamError, ParamValue, Params};
+use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, ParamValue, Params};
 use xsurf_runtime::rosargs::RosArgs;
 
 /// A node type as the registry lists it.
@@ -23,6 +23,18 @@ pub struct NodeType {
     /// How often a live host ticks it when it asks for nothing sooner, ms (sources keep time on
     /// their own clocks; the processing nodes need only slow ticks).
     pub tick_period_ms: u64,
+}
+
+impl NodeType {
+    /// The node type `name` whose parameters are `P`, built by `build`.
+    pub const fn of<P: NodeParams>(
+        name: &'static str,
+        role: Role,
+        tick_period_ms: u64,
+        build: fn(&Params) -> Result<Box<dyn Component>, ParamError>,
+    ) -> NodeType {
+        NodeType { name, declarations: P::declarations, build, role, tick_period_ms }
+    }
 }
 
 /// Where a node type sits in the graph.

@@ -23,13 +23,8 @@ mod params;
 pub use params::*;
 
 /// The node type, as the registry lists it.
-pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
-    name: "c_arm_pose",
-    declarations: <CArmPoseParams as xsurf_runtime::params::NodeParams>::declarations,
-    build: |p| Ok(Box::new(CArmPoseNode::new(p)?)),
-    role: crate::registry::Role::Source,
-    tick_period_ms: 2,
-};
+pub const NODE: crate::registry::NodeType =
+    crate::registry::NodeType::of::<CArmPoseParams>("c_arm_pose", crate::registry::Role::Source, 2, |p| Ok(Box::new(CArmPoseNode::new(p)?)));
 
 use crate::convert;
 use std::path::PathBuf;

@@ -12,13 +12,8 @@ mod source;
 pub use params::*;
 
 /// The node type, as the registry lists it.
-pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
-    name: "camera_driver",
-    declarations: <CameraDriverParams as xsurf_runtime::params::NodeParams>::declarations,
-    build: |p| Ok(Box::new(CameraDriverNode::new(p)?)),
-    role: crate::registry::Role::Source,
-    tick_period_ms: 2,
-};
+pub const NODE: crate::registry::NodeType =
+    crate::registry::NodeType::of::<CameraDriverParams>("camera_driver", crate::registry::Role::Source, 2, |p| Ok(Box::new(CameraDriverNode::new(p)?)));
 
 use crate::edge_detector::Transport;
 use crate::convert;

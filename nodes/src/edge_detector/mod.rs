@@ -4,13 +4,8 @@ mod params;
 pub use params::*;
 
 /// The node type, as the registry lists it.
-pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
-    name: "edge_detector",
-    declarations: <EdgeParams as xsurf_runtime::params::NodeParams>::declarations,
-    build: |p| Ok(Box::new(EdgeDetectorNode::new(p)?)),
-    role: crate::registry::Role::PerCamera,
-    tick_period_ms: 50,
-};
+pub const NODE: crate::registry::NodeType =
+    crate::registry::NodeType::of::<EdgeParams>("edge_detector", crate::registry::Role::PerCamera, 50, |p| Ok(Box::new(EdgeDetectorNode::new(p)?)));
 
 use crate::convert;
 use std::sync::Arc;

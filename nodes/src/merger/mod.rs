@@ -25,13 +25,8 @@ mod params;
 pub use params::*;
 
 /// The node type, as the registry lists it.
-pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
-    name: "merger",
-    declarations: <MergerParams as xsurf_runtime::params::NodeParams>::declarations,
-    build: |p| Ok(Box::new(MergerNode::new(p)?)),
-    role: crate::registry::Role::Scanner,
-    tick_period_ms: 50,
-};
+pub const NODE: crate::registry::NodeType =
+    crate::registry::NodeType::of::<MergerParams>("merger", crate::registry::Role::Scanner, 50, |p| Ok(Box::new(MergerNode::new(p)?)));
 
 use crate::convert;
 use crate::tf::TfBuffer;

@@ -11,13 +11,8 @@ mod params;
 pub use params::*;
 
 /// The node type, as the registry lists it.
-pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
-    name: "mesher",
-    declarations: <MesherParams as xsurf_runtime::params::NodeParams>::declarations,
-    build: |p| Ok(Box::new(MesherNode::new(p)?)),
-    role: crate::registry::Role::PerCamera,
-    tick_period_ms: 50,
-};
+pub const NODE: crate::registry::NodeType =
+    crate::registry::NodeType::of::<MesherParams>("mesher", crate::registry::Role::PerCamera, 50, |p| Ok(Box::new(MesherNode::new(p)?)));
 
 use crate::convert;
 use std::path::PathBuf;

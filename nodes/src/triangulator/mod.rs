@@ -7,13 +7,8 @@ mod params;
 pub use params::*;
 
 /// The node type, as the registry lists it.
-pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
-    name: "triangulator",
-    declarations: <TriangulatorParams as xsurf_runtime::params::NodeParams>::declarations,
-    build: |p| Ok(Box::new(TriangulatorNode::new(p)?)),
-    role: crate::registry::Role::PerCamera,
-    tick_period_ms: 50,
-};
+pub const NODE: crate::registry::NodeType =
+    crate::registry::NodeType::of::<TriangulatorParams>("triangulator", crate::registry::Role::PerCamera, 50, |p| Ok(Box::new(TriangulatorNode::new(p)?)));
 
 use crate::convert;
 use crate::tf::TfBuffer;

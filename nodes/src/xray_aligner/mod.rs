@@ -17,13 +17,8 @@ mod params;
 pub use params::*;
 
 /// The node type, as the registry lists it.
-pub const NODE: crate::registry::NodeType = crate::registry::NodeType {
-    name: "xray_aligner",
-    declarations: <XrayAlignerParams as xsurf_runtime::params::NodeParams>::declarations,
-    build: |p| Ok(Box::new(XrayAlignerNode::new(p)?)),
-    role: crate::registry::Role::Scanner,
-    tick_period_ms: 50,
-};
+pub const NODE: crate::registry::NodeType =
+    crate::registry::NodeType::of::<XrayAlignerParams>("xray_aligner", crate::registry::Role::Scanner, 50, |p| Ok(Box::new(XrayAlignerNode::new(p)?)));
 
 use crate::convert;
 use crate::tf::TfBuffer;
