@@ -1,7 +1,7 @@
 //! The transport-agnostic node: messages in, messages out, typed config from parameters.
 //! The same component runs alone over DDS, composed in one process, or driven from a bag.
 
-use crate::params::{ParamDecl, ParamError, Params};
+use crate::params::{ParamError, Params};
 use std::sync::Arc;
 use xsurf_msgs::{
     cdr, rosgraph_msgs::Clock, sensor_msgs::CameraInfo, sensor_msgs::CompressedImage, sensor_msgs::Image,
@@ -192,8 +192,6 @@ pub trait Component: Send {
     fn outputs(&self) -> Vec<Port>;
     /// Tells the component where it was placed (node name and namespace), before any message.
     fn set_identity(&mut self, _name: &str, _namespace: &str) {}
-    /// The parameters the node declares.
-    fn declarations(&self) -> Vec<ParamDecl>;
     /// Applies a new set of parameter values; a set that fails validation is refused and the
     /// old configuration stays.
     fn reconfigure(&mut self, params: &Params) -> Result<(), ParamError>;

@@ -266,7 +266,7 @@ impl Router {
 mod tests {
     use super::*;
     use crate::component::{NodeError, QosClass};
-    use crate::params::{ParamDecl, ParamError};
+    use crate::params::ParamError;
     use std::sync::{Arc, Mutex};
     use xsurf_msgs::sensor_msgs::Image;
     use xsurf_msgs::RosMessage;
@@ -295,9 +295,6 @@ mod tests {
         }
         fn outputs(&self) -> Vec<Port> {
             vec![Port::new(self.out, Image::TYPE_NAME, QosClass::Reliable)]
-        }
-        fn declarations(&self) -> Vec<ParamDecl> {
-            Vec::new()
         }
         fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
             Ok(())

@@ -383,7 +383,7 @@ impl Threads {
 mod tests {
     use super::*;
     use crate::component::{Component, NodeError, Port};
-    use crate::params::{ParamDecl, ParamError};
+    use crate::params::ParamError;
     use std::sync::Mutex;
     use xsurf_msgs::sensor_msgs::Image;
     use xsurf_msgs::RosMessage;
@@ -416,9 +416,6 @@ mod tests {
         }
         fn outputs(&self) -> Vec<Port> {
             vec![Port::new(self.out, Image::TYPE_NAME, QosClass::Sensor)]
-        }
-        fn declarations(&self) -> Vec<ParamDecl> {
-            Vec::new()
         }
         fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
             Ok(())
@@ -498,9 +495,6 @@ mod tests {
         fn outputs(&self) -> Vec<Port> {
             Vec::new()
         }
-        fn declarations(&self) -> Vec<ParamDecl> {
-            Vec::new()
-        }
         fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
             Ok(())
         }
@@ -555,9 +549,6 @@ mod tests {
             vec![Port::new("/pose", Image::TYPE_NAME, QosClass::Reliable)]
         }
         fn outputs(&self) -> Vec<Port> {
-            Vec::new()
-        }
-        fn declarations(&self) -> Vec<ParamDecl> {
             Vec::new()
         }
         fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
@@ -622,9 +613,6 @@ mod tests {
             vec![Port::new("/x", Image::TYPE_NAME, QosClass::Reliable)]
         }
         fn outputs(&self) -> Vec<Port> {
-            Vec::new()
-        }
-        fn declarations(&self) -> Vec<ParamDecl> {
             Vec::new()
         }
         fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {

@@ -38,7 +38,7 @@ use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
+use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 struct Config {
     encoder: bool,
@@ -345,9 +345,6 @@ impl Component for CArmPoseNode {
             Port::new("/joint_states", JointState::TYPE_NAME, QosClass::Reliable),
             Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
         ]
-    }
-    fn declarations(&self) -> Vec<ParamDecl> {
-        CArmPoseParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         let mut c = config(p)?;

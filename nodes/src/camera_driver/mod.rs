@@ -28,7 +28,7 @@ use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
+use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 /// Where the images come from, as the parameters describe it.
 #[derive(Debug, Clone, PartialEq)]
@@ -283,9 +283,6 @@ impl Component for CameraDriverNode {
             Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
             Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
         ]
-    }
-    fn declarations(&self) -> Vec<ParamDecl> {
-        CameraDriverParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         self.cfg = config(p)?;

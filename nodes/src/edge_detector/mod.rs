@@ -17,7 +17,7 @@ use xsurf_msgs::xsurf_msgs::LaserLine as LineMsg;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
+use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 /// The edge detector component.
 pub struct EdgeDetectorNode {
@@ -126,9 +126,6 @@ impl Component for EdgeDetectorNode {
             Port::new("laser_line", LineMsg::TYPE_NAME, QosClass::Reliable),
             Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
         ]
-    }
-    fn declarations(&self) -> Vec<ParamDecl> {
-        EdgeParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         let p = EdgeParams::from_params(p)?;

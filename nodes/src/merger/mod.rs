@@ -48,7 +48,7 @@ use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
+use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 struct Config {
     cameras: Vec<String>,
@@ -594,9 +594,6 @@ impl Component for MergerNode {
             Port::new("/surface/mesh", Marker::TYPE_NAME, QosClass::State),
             Port::new("/surface/placements", TFMessage::TYPE_NAME, QosClass::Reliable),
         ]
-    }
-    fn declarations(&self) -> Vec<ParamDecl> {
-        MergerParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         let c = config(p)?;

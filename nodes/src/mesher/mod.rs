@@ -26,7 +26,7 @@ use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
+use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 struct Config {
     mesh: MeshConfig,
@@ -470,9 +470,6 @@ impl Component for MesherNode {
             Port::new("mesh", Marker::TYPE_NAME, QosClass::State),
             Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
         ]
-    }
-    fn declarations(&self) -> Vec<ParamDecl> {
-        MesherParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         self.cfg = config(p)?;

@@ -23,7 +23,7 @@ use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::{LaserLine, ScanEvent};
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
+use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 /// The plane `[nx, ny, nz, d]` of the parameter `name`: four values, a normal that is not zero.
 pub(crate) fn laser_plane(name: &str, v: &[f64]) -> Result<[f64; 4], ParamError> {
@@ -222,9 +222,6 @@ impl Component for TriangulatorNode {
             Port::new("profile", PointCloud2::TYPE_NAME, QosClass::Reliable),
             Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
         ]
-    }
-    fn declarations(&self) -> Vec<ParamDecl> {
-        TriangulatorParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         self.cfg = config(p)?;

@@ -36,7 +36,7 @@ use xsurf_msgs::visualization_msgs::{Marker, UVCoordinate};
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
 use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
-use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, Params};
+use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 #[derive(Debug, Clone, PartialEq)]
 struct Config {
@@ -421,9 +421,6 @@ impl Component for XrayAlignerNode {
         }
         v.push(Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::State));
         v
-    }
-    fn declarations(&self) -> Vec<ParamDecl> {
-        XrayAlignerParams::declarations()
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
         let c = config(p)?;
