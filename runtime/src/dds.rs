@@ -603,9 +603,9 @@ pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> 
     let (tx, rx) = sync_channel::<Event>(QUEUE_DEPTH);
     let dropped = Arc::new(AtomicU64::new(0));
     let feed = Feed { tx: tx.clone(), dropped: dropped.clone(), stop: stop.clone() };
-    let Placement { router, mut dds_nodes, mut configs, sim_time } = place_nodes(&ctx, nodes, &tx)?;
-    let (pubs, sensor_topics) = make_publishers(&router, &mut dds_nodes, &configs)?;
-    let externals = subscribe_externals(&router, &mut dds_nodes, &configs, &pubs, &feed)?;
+    let Placement { router, mut dds_nodes, mut configs, qos, sim_time } = place_nodes(&ctx, nodes, &tx)?;
+    let (pubs, sensor_topics) = make_publishers(&router, &mut dds_nodes, &qos)?;
+    let externals = subscribe_externals(&router, &mut dds_nodes, &qos, &pubs, &feed)?;
     let _clock = if sim_time { Some(clock_subscription(env, &feed)?) } else { None };
     drop(tx);
     drop(feed);
@@ -680,6 +680,8 @@ struct Placement {
     router: crate::router::Router,
     dds_nodes: Vec<DdsNode>,
     configs: Vec<(HostConfig, Params)>,
+    /// Each node's QoS by topic class (its `qos.*` parameters).
+    qos: Vec<QosTable>,
     /// Some node takes its time from `/clock`.
     sim_time: bool,
 }
@@ -691,8 +693,13 @@ fn place_nodes(
     nodes: Vec<(HostConfig, Box<dyn Component>)>,
     tx: &SyncSender<Event>,
 ) -> Result<Placement, HostError> {
-    let mut p =
-        Placement { router: crate::router::Router::new(), dds_nodes: Vec::new(), configs: Vec::new(), sim_time: false };
+    let mut p = Placement {
+        router: crate::router::Router::new(),
+        dds_nodes: Vec::new(),
+        configs: Vec::new(),
+        qos: Vec::new(),
+        sim_time: false,
+    };
     for (i, (cfg, component)) in nodes.into_iter().enumerate() {
         let (ptx, prx) = sync_channel::<(String, ParamValue)>(16);
         let dn = create_node(ctx, &cfg, Some(ptx))?;
@@ -723,6 +730,7 @@ fn place_nodes(
             })
             .map_err(|e| HostError::Dds(format!("thread: {e}")))?;
         p.sim_time |= matches!(cfg.params.get("use_sim_time"), Some(ParamValue::Bool(true)));
+        p.qos.push(QosTable::from_params(&cfg.params).map_err(HostError::Dds)?);
         p.router.add(component, &cfg.name, &cfg.namespace, &cfg.remaps);
         let params = cfg.params.clone();
         p.configs.push((cfg, params));
@@ -739,12 +747,12 @@ fn place_nodes(
 fn make_publishers(
     router: &crate::router::Router,
     dds_nodes: &mut [DdsNode],
-    configs: &[(HostConfig, Params)],
+    qos: &[QosTable],
 ) -> Result<(Publishers, Vec<String>), HostError> {
     let mut pubs = Publishers::default();
     let mut sensor_topics = Vec::new();
     for (ni, n) in router.nodes().iter().enumerate() {
-        let table = QosTable::from_params(&configs[ni].1).map_err(HostError::Dds)?;
+        let table = &qos[ni];
         for (p, topic) in &n.outputs {
             if !pubs.has(topic) {
                 let pb = dds_nodes[ni].make_publisher(topic, p.type_name, table.get(p.qos))?;
@@ -769,7 +777,7 @@ type External = (String, Port, Arc<Vec<ros2_client::Gid>>);
 fn subscribe_externals(
     router: &crate::router::Router,
     dds_nodes: &mut [DdsNode],
-    configs: &[(HostConfig, Params)],
+    qos: &[QosTable],
     pubs: &Publishers,
     feed: &Feed,
 ) -> Result<Vec<External>, HostError> {
@@ -781,7 +789,7 @@ fn subscribe_externals(
     }
     for (k, (topic, p, ignore)) in externals.iter().enumerate() {
         let ni = router.nodes().iter().position(|n| n.inputs.iter().any(|(_, t)| t == topic)).unwrap_or(0);
-        let table = QosTable::from_params(&configs[ni].1).map_err(HostError::Dds)?;
+        let table = &qos[ni];
         subscribe(
             dds_nodes[ni].node(),
             topic,
