@@ -303,10 +303,11 @@ fn malformed_messages_from_a_dds_peer_cost_only_themselves() {
                 && (e.height_m - 0.086).abs() < 0.001,
             "scan {scan}: {e:?}"
         );
-        // The surface over the pyramid's base: the share of its 5 mm cells that hold a point
-        // (a lost frame, 2.3 mm of travel, leaves none empty; a lost camera or a broken grid
-        // does), and the points there.
-        const CELL: f64 = 0.005;
+        // The surface over the pyramid's base: the share of its 10 mm cells that hold a point
+        // (up to three frames lost in a row, 9.2 mm of travel, leave none empty, as a loaded
+        // machine's best-effort camera streams sometimes do; a lost camera, half a face and more,
+        // or a broken grid does), and the points there.
+        const CELL: f64 = 0.010;
         let cell = |v: f32| (f64::from(v) / CELL).floor() as i32;
         let inside = |i: i32, j: i32| {
             ((f64::from(i) + 0.5) * CELL).abs() < 0.105 && ((f64::from(j) + 0.5) * CELL).abs() < 0.1485

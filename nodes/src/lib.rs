@@ -18,6 +18,7 @@ pub mod play;
 pub mod record;
 pub mod registry;
 mod republish;
+pub mod scan_report;
 pub mod synth;
 mod tally;
 pub mod tf;

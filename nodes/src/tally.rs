@@ -11,6 +11,33 @@ use xsurf_msgs::std_msgs::StringMsg;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_runtime::component::Msg;
 
+use crate::scan_report::{Refusal, StageReport};
+
+/// The per-camera nodes before the mesher, each counting its frames: the camera_driver those
+/// sent (`frames_sent`), the edge_detector those taken (`frames_taken`), the triangulator those
+/// placed (`frames_placed`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) enum Stage {
+    /// The camera_driver.
+    #[default]
+    CameraDriver,
+    /// The edge_detector.
+    EdgeDetector,
+    /// The triangulator.
+    Triangulator,
+}
+
+impl Stage {
+    /// The node's name.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Stage::CameraDriver => "camera_driver",
+            Stage::EdgeDetector => "edge_detector",
+            Stage::Triangulator => "triangulator",
+        }
+    }
+}
+
 /// Refusal reasons kept per scan, each with its count and first message.
 const MAX_REASONS: usize = 8;
 
@@ -64,8 +91,8 @@ pub(crate) struct ScanTally {
     scan: Option<(u32, i64)>,
     /// END or ABORT seen, the report not yet made: `(scan id, END stamp)`.
     ending: Option<(u32, i64)>,
-    /// The report's labels: node, camera, what the counted frames are.
-    labels: (String, String, String),
+    /// The report's labels: the node, the camera.
+    labels: (Stage, String),
     /// The frames counted (sent, taken, placed).
     counted: Stamps,
     /// Frame slots skipped (a camera behind its rate).
@@ -75,12 +102,11 @@ pub(crate) struct ScanTally {
 }
 
 impl ScanTally {
-    /// Follows a scan event of `node` for `camera` (`counted_as`: what the counted frames are,
-    /// e.g. `frames_sent`). The report of a scan is made [`GRACE_NS`] after its END or ABORT
+    /// Follows a scan event of `node` for `camera`. The report of a scan is made [`GRACE_NS`] after its END or ABORT
     /// (see [`ScanTally::due`]), or at the next START; a START returns the last scan's report
     /// if it was still waiting.
-    pub(crate) fn event(&mut self, e: &ScanEvent, node: &str, camera: &str, counted_as: &str) -> Option<Msg> {
-        self.labels = (node.to_string(), camera.to_string(), counted_as.to_string());
+    pub(crate) fn event(&mut self, e: &ScanEvent, node: Stage, camera: &str) -> Option<Msg> {
+        self.labels = (node, camera.to_string());
         let stamp = e.header.stamp.nanos();
         match e.event {
             ScanEvent::START => {
@@ -112,31 +138,36 @@ impl ScanTally {
     /// The report of the scan that ended, now (at shutdown, or at the next START).
     pub(crate) fn report(&mut self) -> Option<Msg> {
         let (id, stamp) = self.ending.take()?;
-        let mut refused = serde_json::Map::new();
-        let mut refused_total = 0;
+        let mut refused = BTreeMap::new();
         for (why, r) in &self.refused {
-            let n = r.before(stamp);
-            if n > 0 {
-                refused_total += n;
-                let first = r.first.iter().find(|(t, _)| *t < stamp).map(|(_, m)| m.as_str());
-                refused.insert(why.to_string(), serde_json::json!({"frames": n, "first": first}));
+            let frames = r.before(stamp) as u64;
+            if frames > 0 {
+                let first = r.first.iter().find(|(t, _)| *t < stamp).map(|(_, m)| m.clone());
+                refused.insert(why.to_string(), Refusal { first, frames });
             }
         }
-        let (node, camera, counted_as) = &self.labels;
-        let report = serde_json::json!({
-            "scan_id": id,
-            "camera": camera,
-            "node": node,
-            counted_as.as_str(): self.counted.before(stamp),
-            "frames_skipped": self.skipped.before(stamp),
-            "frames_refused": refused_total,
-            "refused": refused,
-        });
+        let (node, camera) = self.labels.clone();
+        let counted = Some(self.counted.before(stamp) as u64);
+        let mut report = StageReport {
+            camera,
+            frames_refused: refused.values().map(|r| r.frames).sum(),
+            frames_skipped: self.skipped.before(stamp) as u64,
+            refused,
+            scan_id: id,
+            ..StageReport::default()
+        };
+        match node {
+            Stage::CameraDriver => report.frames_sent = counted,
+            Stage::EdgeDetector => report.frames_taken = counted,
+            Stage::Triangulator => report.frames_placed = counted,
+        }
+        report.node = node.name().to_string();
         // What came after the END stamp may be the next scan's (its START not yet seen).
         self.counted.start(stamp);
         self.skipped.start(stamp);
         self.refused.values_mut().for_each(|r| r.start(stamp));
-        Some(Msg::Text(Arc::new(StringMsg { data: report.to_string() })))
+        let data = serde_json::to_string(&report).unwrap_or_default();
+        Some(Msg::Text(Arc::new(StringMsg { data })))
     }
     fn start(&self) -> Option<i64> {
         self.scan.map(|(_, s)| s)
@@ -182,7 +213,7 @@ mod tests {
         let mut t = ScanTally::default();
         t.count(5 * s); // before any scan
         t.count(10 * s); // the scan's first frame, before its START event arrives
-        assert!(t.event(&event(ScanEvent::START, 4, 10), "camera_driver", "cam1", "frames_sent").is_none());
+        assert!(t.event(&event(ScanEvent::START, 4, 10), Stage::CameraDriver, "cam1").is_none());
         t.count(9 * s); // exposed before START
         t.count(11 * s);
         t.count(12 * s);
@@ -190,7 +221,7 @@ mod tests {
         t.refuse(12 * s, "image", "image at 12: bad");
         t.refuse(12 * s, "image", "image at 12: worse");
         t.count(21 * s); // after the END stamp, counted before END arrived
-        assert!(t.event(&event(ScanEvent::END, 4, 20), "camera_driver", "cam1", "frames_sent").is_none());
+        assert!(t.event(&event(ScanEvent::END, 4, 20), Stage::CameraDriver, "cam1").is_none());
         t.count(19 * s); // exposed in the scan, arriving after its END
         for _ in 0..2 * BETWEEN_SCANS {
             t.count(21 * s); // the next scan's, before its START: none of this one's frames go
@@ -205,7 +236,7 @@ mod tests {
         assert_eq!(r["frames_refused"], 2);
         assert_eq!(r["refused"]["image"]["first"], "image at 12: bad");
         // No scan: nothing to report.
-        assert!(t.event(&event(ScanEvent::END, 4, 30), "camera_driver", "cam1", "frames_sent").is_none());
+        assert!(t.event(&event(ScanEvent::END, 4, 30), Stage::CameraDriver, "cam1").is_none());
         assert!(t.due(40 * s).is_none() && t.report().is_none());
     }
 }

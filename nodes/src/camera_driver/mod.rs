@@ -316,7 +316,7 @@ impl Component for CameraDriverNode {
                     // An event no scan has does not turn the laser off in the middle of one.
                     other => return Err(NodeError::new(format!("unknown scan event {other}"))),
                 };
-                if let Some(report) = self.tally.event(e, "camera_driver", &self.camera, "frames_sent") {
+                if let Some(report) = self.tally.event(e, crate::tally::Stage::CameraDriver, &self.camera) {
                     out.publish(OUT_REPORT, report);
                 }
                 Ok(())

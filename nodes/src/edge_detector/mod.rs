@@ -150,7 +150,7 @@ impl Component for EdgeDetectorNode {
                 Ok(())
             }
             (IN_EVENTS, Msg::ScanEvent(e)) => {
-                if let Some(report) = self.tally.event(e, "edge_detector", &self.camera, "frames_taken") {
+                if let Some(report) = self.tally.event(e, crate::tally::Stage::EdgeDetector, &self.camera) {
                     out.publish(OUT_REPORT, report);
                 }
                 Ok(())

@@ -29,6 +29,7 @@ pub const NODE: crate::registry::NodeType =
     crate::registry::NodeType::of::<MergerParams>("merger", crate::registry::Role::Scanner, 50, |p| Ok(Box::new(MergerNode::new(p)?)));
 
 use crate::convert;
+use crate::scan_report::{CameraAccount, MesherReport, Report, ScanReport, StageReport};
 use crate::tf::TfBuffer;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -112,6 +113,17 @@ fn config(p: &Params) -> Result<Config, ParamError> {
 /// arriving later can be added to its scene files).
 type LastMerge = (u32, Mesh, Vec<(String, Mesh)>);
 
+/// One camera's reports of one scan: its mesher's, and the nodes' before it by node name.
+#[derive(Debug, Default)]
+struct CameraReports {
+    mesher: Option<MesherReport>,
+    upstream: BTreeMap<String, StageReport>,
+}
+
+/// Reports kept at most (scans and cameras): those of scans furthest from the current one go
+/// first, so that a peer sending reports of any scan id cannot grow the merger.
+const MAX_REPORTS: usize = 32;
+
 /// The merger component.
 pub struct MergerNode {
     cfg: Config,
@@ -121,10 +133,11 @@ pub struct MergerNode {
     camera_sizes: BTreeMap<usize, (u32, u32)>,
     /// The current scan's START stamp: an older cloud is a late one of an earlier scan.
     scan_start_ns: Option<i64>,
-    /// The meshers' reports of the current scan (`/scan/report`), by camera.
-    reports: BTreeMap<String, serde_json::Value>,
-    /// The other per-camera nodes' reports of the current scan, by camera and node.
-    upstream: BTreeMap<(String, String), serde_json::Value>,
+    /// The reports on `/scan/report`, by scan and camera: the current scan's, and any that
+    /// arrived before the merger saw their scan's START or END (they take other paths).
+    reports: BTreeMap<(u32, String), CameraReports>,
+    /// The last scan whose account was written, with the cameras merged.
+    reported: Option<(u32, Vec<String>)>,
     scan_id: u32,
     pending_deadline: Option<i64>,
     merges: u64,
@@ -162,7 +175,7 @@ impl MergerNode {
             camera_sizes: BTreeMap::new(),
             scan_start_ns: None,
             reports: BTreeMap::new(),
-            upstream: BTreeMap::new(),
+            reported: None,
             scan_id: 0,
             pending_deadline: None,
             merges: 0,
@@ -217,7 +230,8 @@ impl MergerNode {
         let grids: Vec<(String, Grid)> =
             self.clouds.iter().map(|(&i, (_, g))| (self.cfg.cameras[i].clone(), g.clone())).collect();
         let (names, mut gs): (Vec<String>, Vec<Grid>) = grids.into_iter().unzip();
-        let scan_report = self.scan_report(&names);
+        let scan_report = self.scan_report(self.scan_id, &names);
+        self.reported = Some((self.scan_id, names.clone()));
         let (refined, refinement) = self.refine(&names, &mut gs);
         if !refined.is_empty() {
             let placements = TFMessage {
@@ -338,81 +352,71 @@ impl MergerNode {
         self.problems.push(why);
     }
 
+    /// Keeps a report of a camera of ours (the others are no merge's).
+    fn keep_report(&mut self, r: Report) {
+        if !self.cfg.cameras.iter().any(|c| c == r.camera()) {
+            return;
+        }
+        let reports = self.reports.entry((r.scan_id(), r.camera().to_string())).or_default();
+        match r {
+            Report::Mesher(m) => reports.mesher = Some(m),
+            Report::Stage(s) => {
+                reports.upstream.insert(s.node.clone(), s);
+            }
+        }
+        while self.reports.len() > MAX_REPORTS {
+            let current = self.scan_id;
+            let furthest = self.reports.keys().max_by_key(|(scan, _)| scan.abs_diff(current)).cloned();
+            if let Some(k) = furthest {
+                self.reports.remove(&k);
+            }
+        }
+    }
+
     /// The scan's account: each camera's report from its mesher, the cameras whose surface is
     /// missing from the merge (no cloud) and those that lost frames; the last two are logged.
-    fn scan_report(&self, merged: &[String]) -> serde_json::Value {
-        let missing: Vec<&String> = self.cfg.cameras.iter().filter(|c| !merged.contains(c)).collect();
+    fn scan_report(&self, scan_id: u32, merged: &[String]) -> ScanReport {
+        let missing: Vec<String> = self.cfg.cameras.iter().filter(|c| !merged.contains(c)).cloned().collect();
         for c in &missing {
-            log::warn!("merger: scan {}: no surface from {c}: merged without it", self.scan_id);
+            log::warn!("merger: scan {}: no surface from {c}: merged without it", scan_id);
         }
         let mut incomplete = Vec::new();
-        let cameras: BTreeMap<&String, serde_json::Value> =
-            self.cfg.cameras.iter().filter_map(|c| Some((c, self.camera_account(c, self.reports.get(c)?)))).collect();
+        let cameras: BTreeMap<&String, CameraAccount> = self
+            .cfg
+            .cameras
+            .iter()
+            .filter_map(|c| {
+                let r = self.reports.get(&(scan_id, c.clone()))?;
+                Some((c, CameraAccount::new(r.mesher.clone()?, r.upstream.clone())))
+            })
+            .collect();
         for c in merged {
             match cameras.get(c) {
-                Some(r) if r["frames_lost"].as_u64().unwrap_or(0) > 0 => {
-                    let gaps: Vec<String> = r["gaps"]
-                        .as_array()
-                        .into_iter()
-                        .flatten()
-                        .map(|g| format!("{} after {}", g["frames"], g["after"].as_str().unwrap_or("?")))
-                        .collect();
+                Some(a) if a.mesher.frames_lost > 0 => {
+                    let gaps: Vec<String> = a.mesher.gaps.iter().map(|g| format!("{} after {}", g.frames, g.after)).collect();
                     log::warn!(
                         "merger: scan {}: {c} lost {} of {} frames ({} in transport, {} refused on the way, {} never sent; gaps: {})",
-                        self.scan_id,
-                        r["frames_lost"],
-                        r["frames_expected"],
-                        r["frames_lost_in_transport"],
-                        r["frames_refused_upstream"],
-                        r["frames_not_sent"],
+                        scan_id,
+                        a.mesher.frames_lost,
+                        a.mesher.frames_expected,
+                        a.frames_lost_in_transport,
+                        a.frames_refused_upstream,
+                        a.frames_not_sent,
                         if gaps.is_empty() { "at the ends".to_string() } else { gaps.join(", ") }
                     );
                     incomplete.push(c.clone());
                 }
                 Some(_) => {}
-                None => log::warn!("merger: scan {}: no report from {c}'s mesher", self.scan_id),
+                None => log::warn!("merger: scan {}: no report from {c}'s mesher", scan_id),
             }
         }
-        serde_json::json!({
-            "scan_id": self.scan_id,
-            "merged": merged,
-            "missing": missing,
-            "incomplete": incomplete,
-            "cameras": cameras.into_values().collect::<Vec<_>>(),
-        })
-    }
-
-    /// Camera `c`'s account of the scan: its mesher's report, the reports of the nodes before
-    /// it (under `upstream`, by node), and the frames the mesher did not get, told apart:
-    /// refused on the way (`frames_refused_upstream`, reasons under `refused`), never sent (a
-    /// camera behind its rate: `frames_not_sent`), and lost in transport (the rest: what the
-    /// camera sent in the scan, less what the mesher took or refused and what was refused on
-    /// the way; without the camera_driver's report, the mesher's gaps less the other two).
-    fn camera_account(&self, c: &str, mesher: &serde_json::Value) -> serde_json::Value {
-        let mut r = mesher.clone();
-        let nodes: Vec<(&String, &serde_json::Value)> =
-            self.upstream.iter().filter(|((cam, _), _)| cam == c).map(|((_, node), v)| (node, v)).collect();
-        let count = |v: &serde_json::Value, k: &str| v[k].as_u64().unwrap_or(0);
-        let refused: u64 =
-            nodes.iter().filter(|(n, _)| *n != "camera_driver").map(|(_, v)| count(v, "frames_refused")).sum();
-        let driver = nodes.iter().find(|(n, _)| *n == "camera_driver").map(|(_, v)| *v);
-        let not_sent = driver.map_or(0, |v| count(v, "frames_skipped"));
-        let (received, lost) = (count(mesher, "frames_received"), count(mesher, "frames_lost"));
-        let in_transport = match driver {
-            Some(v) => count(v, "frames_sent")
-                .saturating_sub(received + count(mesher, "profiles_refused"))
-                .saturating_sub(refused),
-            None => lost.saturating_sub(refused + not_sent),
-        };
-        r["frames_sent"] = driver.map_or(serde_json::Value::Null, |v| v["frames_sent"].clone());
-        r["frames_not_sent"] = not_sent.into();
-        r["frames_refused_upstream"] = refused.into();
-        r["frames_lost_in_transport"] = in_transport.into();
-        r["refused"] =
-            nodes.iter().map(|(n, v)| ((*n).clone(), v["refused"].clone())).collect::<serde_json::Map<_, _>>().into();
-        r["upstream"] =
-            nodes.iter().map(|(n, v)| ((*n).clone(), (*v).clone())).collect::<serde_json::Map<_, _>>().into();
-        r
+        ScanReport {
+            scan_id,
+            merged: merged.to_vec(),
+            missing,
+            incomplete,
+            cameras: cameras.into_values().collect(),
+        }
     }
 
     fn write(
@@ -421,12 +425,12 @@ impl MergerNode {
         merged: &Mesh,
         meshes: &[(String, Mesh)],
         refinement: &[Record],
-        scan_report: Option<&serde_json::Value>,
+        scan_report: Option<&ScanReport>,
     ) {
         let Some(out) = self.cfg.output_dir.clone() else { return };
         let dir = out.join(format!("scan_{scan_id}"));
         if let Some(report) = scan_report {
-            self.write_json(&dir, "scan_report.json", report);
+            self.write_report(scan_id, report);
         }
         let plane = self.overlays.get(&scan_id);
         if let Err(e) = write_files(&dir, merged, meshes, plane, self.cfg.transparency) {
@@ -439,6 +443,14 @@ impl MergerNode {
     }
 
     /// Writes `value` as `dir/name` (atomically, `dir` made if need be); a failure is counted.
+    /// Writes `scan_<id>/scan_report.json`.
+    fn write_report(&mut self, scan_id: u32, report: &ScanReport) {
+        let Some(out) = self.cfg.output_dir.clone() else { return };
+        // Through a JSON value, whose keys are sorted (the flattened mesher report's too).
+        let value = serde_json::to_value(report).unwrap_or_default();
+        self.write_json(&out.join(format!("scan_{scan_id}")), "scan_report.json", &value);
+    }
+
     fn write_json(&mut self, dir: &std::path::Path, name: &str, value: &serde_json::Value) {
         let path = dir.join(name);
         let text = serde_json::to_string_pretty(value).unwrap_or_default();
@@ -618,17 +630,14 @@ impl Component for MergerNode {
                 Ok(())
             }
             (Input::Report, Msg::Text(t)) => {
-                let r: serde_json::Value = serde_json::from_str(&t.data)
-                    .map_err(|e| NodeError::new(format!("/scan/report: not JSON: {e}")))?;
-                let cam = r["camera"].as_str().unwrap_or("").to_string();
-                let node = r["node"].as_str().unwrap_or("mesher").to_string();
-                // A report of another scan, or of no camera of ours, is not this merge's.
-                if r["scan_id"].as_u64() == Some(u64::from(self.scan_id)) && self.cfg.cameras.contains(&cam) {
-                    if node == "mesher" {
-                        self.reports.insert(cam, r);
-                    } else {
-                        self.upstream.insert((cam, node), r);
-                    }
+                let r = Report::parse(&t.data).map_err(|e| NodeError::new(format!("/scan/report: {e}")))?;
+                let scan = r.scan_id();
+                self.keep_report(r);
+                // A report of a scan already merged: its account is written again, whole.
+                if let Some((id, names)) = self.reported.clone().filter(|(id, _)| *id == scan) {
+                    log::info!("merger: scan {id}: a report arrived after the merge; scan_report.json written again");
+                    let report = self.scan_report(id, &names);
+                    self.write_report(id, &report);
                 }
                 Ok(())
             }
@@ -654,8 +663,7 @@ impl Component for MergerNode {
                         self.motion = None;
                         self.scan_id = e.scan_id;
                         self.scan_start_ns = Some(e.header.stamp.nanos());
-                        self.reports.clear();
-                        self.upstream.clear();
+                        self.reports.retain(|(scan, _), _| *scan == e.scan_id);
                     }
                     ScanEvent::END => {
                         self.scan_id = e.scan_id;
@@ -794,27 +802,81 @@ mod tests {
     /// END and merge_delay_s, one layer is published on /surface/cloud and /surface/mesh,
     /// about one camera's points, not both; a camera 5 mm off (beyond it) stays a layer of its
     /// own.
+    /// A camera's grid of `frames` frames of `samples` points on a flat patch at height
+    /// 0.02 + `dz`, stamped at `sec`.
+    fn flat_cloud(samples: usize, frames: usize, dz: f32, sec: i32) -> Msg {
+        use xsurf_core::triangulate::Profile;
+        let mut g = Grid::new(samples);
+        for f in 0..frames {
+            let p = Profile {
+                points: (0..samples).map(|s| [0.002 * s as f32, 0.002 * f as f32, 0.02 + dz]).collect(),
+                intensity: vec![50.0; samples],
+                rgb: None,
+                range: vec![0.5; samples],
+                outside_volume: 0,
+            };
+            g.push(i64::from(sec) * 1_000_000_000 + f as i64, &p).unwrap();
+        }
+        let mut h = xsurf_msgs::std_msgs::Header::default();
+        h.stamp.sec = sec;
+        Msg::Cloud(Arc::new(convert::grid_cloud(&g, h)))
+    }
+
+    /// The reports take other paths than the scan events: one that arrives before its scan's
+    /// START is kept for it, and one that arrives after the merge has its scan's
+    /// scan_report.json written again, whole; reports of other scans and cameras, and bad
+    /// ones, are none of it.
+    #[test]
+    fn reports_before_the_scan_and_after_the_merge_reach_its_account() {
+        use xsurf_runtime::harness::Harness;
+        let dir = std::env::temp_dir().join(format!("xsurf-merger-reports-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut o = BTreeMap::new();
+        o.insert("refine".to_string(), xsurf_runtime::params::ParamValue::Bool(false));
+        o.insert("output_dir".to_string(), xsurf_runtime::params::ParamValue::String(dir.to_string_lossy().into()));
+        let params = Params::resolve(&MergerParams::declarations(), &o).unwrap();
+        let mut h = Harness::new(Box::new(MergerNode::new(&params).unwrap()), "merger", "/");
+        let event = |event, sec| {
+            let mut e = ScanEvent { scan_id: 5, event, ..Default::default() };
+            e.header.stamp.sec = sec;
+            Msg::ScanEvent(Arc::new(e))
+        };
+        let report = |json: serde_json::Value| Msg::Text(Arc::new(StringMsg { data: json.to_string() }));
+        let mesher = |cam: &str, scan: u32, lost: u64| {
+            report(serde_json::json!({"node": "mesher", "camera": cam, "scan_id": scan, "aborted": false,
+                "frames_expected": 20 + lost, "frames_received": 20, "frames_lost": lost, "frames_without_line": 0,
+                "gaps": [], "points_rejected": 0, "profiles_refused": 0}))
+        };
+        h.feed("/scan/report", &mesher("cam1", 5, 2))
+            .feed("/scan/report", &mesher("cam1", 4, 9))
+            .feed("/scan/report", &mesher("cam9", 5, 9))
+            .feed("/scan/report", &report(serde_json::json!({"node": "mesher", "scan_id": "five"})))
+            .feed("/scan/events", &event(ScanEvent::START, 10))
+            .feed("/cam1/cloud", &flat_cloud(30, 20, 0.0, 11))
+            .feed("/cam2/cloud", &flat_cloud(30, 20, 0.0, 11))
+            .feed("/scan/events", &event(ScanEvent::END, 12));
+        assert_eq!(h.errors(), 1, "the bad report is refused");
+        assert!(h.last_error().unwrap_or_default().contains("/scan/report: not a mesher report"), "{:?}", h.last_error());
+        h.tick(13_100_000_000);
+        let read = || -> serde_json::Value {
+            serde_json::from_slice(&std::fs::read(dir.join("scan_5/scan_report.json")).unwrap()).unwrap()
+        };
+        let r = read();
+        assert_eq!((r["merged"].clone(), r["incomplete"].clone()), (serde_json::json!(["cam1", "cam2"]), serde_json::json!(["cam1"])));
+        assert_eq!(r["cameras"].as_array().unwrap().len(), 1, "{r}");
+        assert_eq!(r["cameras"][0]["frames_lost"], 2, "{r}");
+        h.feed("/scan/report", &mesher("cam2", 5, 0));
+        let r = read();
+        assert_eq!(r["cameras"].as_array().unwrap().len(), 2, "{r}");
+        assert_eq!(r["cameras"][1]["camera"], "cam2", "{r}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn overlapping_cameras_merge_into_one_layer_after_the_delay() {
-        use xsurf_core::triangulate::Profile;
         use xsurf_runtime::harness::Harness;
         let (samples, frames) = (30, 20);
-        let cloud = |dz: f32, sec: i32| {
-            let mut g = Grid::new(samples);
-            for f in 0..frames {
-                let p = Profile {
-                    points: (0..samples).map(|s| [0.002 * s as f32, 0.002 * f as f32, 0.02 + dz]).collect(),
-                    intensity: vec![50.0; samples],
-                    rgb: None,
-                    range: vec![0.5; samples],
-                    outside_volume: 0,
-                };
-                g.push(i64::from(sec) * 1_000_000_000 + f as i64, &p).unwrap();
-            }
-            let mut h = xsurf_msgs::std_msgs::Header::default();
-            h.stamp.sec = sec;
-            Msg::Cloud(Arc::new(convert::grid_cloud(&g, h)))
-        };
+        let cloud = |dz: f32, sec: i32| flat_cloud(samples, frames, dz, sec);
         let event = |event, sec| {
             let mut e = ScanEvent { scan_id: 3, event, ..Default::default() };
             e.header.stamp.sec = sec;

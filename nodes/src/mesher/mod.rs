@@ -15,6 +15,7 @@ pub const NODE: crate::registry::NodeType =
     crate::registry::NodeType::of::<MesherParams>("mesher", crate::registry::Role::PerCamera, 50, |p| Ok(Box::new(MesherNode::new(p)?)));
 
 use crate::convert;
+use crate::scan_report::{Gap, MesherReport};
 use std::path::PathBuf;
 use std::sync::Arc;
 use xsurf_core::edge::Orientation;
@@ -138,29 +139,31 @@ impl ScanAccount {
         let received = self.received.iter().filter(|&&t| end_ns.is_none_or(|e| t < e)).count() as u64;
         let margin = |a: Option<i64>, b: Option<i64>| a.zip(b).map(|(a, b)| (b - a) as f64 * 1e-9);
         let t = |ns: Option<i64>| ns.map(convert::fmt_stamp);
-        serde_json::json!({
-            "scan_id": scan_id,
-            "node": "mesher",
-            "camera": camera,
-            "aborted": aborted,
-            "start": t(self.start_ns),
-            "end": t(end_ns),
-            "first_frame": t(self.first_ns),
-            "last_frame": t(self.last_ns),
-            "frame_period_s": period_ns.map(|p| p as f64 * 1e-9),
-            "frames_expected": received + lost,
-            "frames_received": received,
-            "frames_lost": lost,
-            "first_frame_after_start_s": margin(self.start_ns, self.first_ns),
-            "last_frame_before_end_s": margin(self.last_ns, end_ns),
-            "frames_without_line": self.without_line,
-            "profiles_refused": self.refused,
-            "points_rejected": self.points_rejected,
-            "gaps": self.gaps.iter().map(|g| serde_json::json!({
-                "after": convert::fmt_stamp(g.0), "before": convert::fmt_stamp(g.1), "frames": g.2,
-            })).collect::<Vec<_>>(),
-        })
-        .to_string()
+        let report = MesherReport {
+            aborted,
+            camera: camera.to_string(),
+            end: t(end_ns),
+            first_frame: t(self.first_ns),
+            first_frame_after_start_s: margin(self.start_ns, self.first_ns),
+            frame_period_s: period_ns.map(|p| p as f64 * 1e-9),
+            frames_expected: received + lost,
+            frames_lost: lost,
+            frames_received: received,
+            frames_without_line: self.without_line,
+            gaps: self
+                .gaps
+                .iter()
+                .map(|g| Gap { after: convert::fmt_stamp(g.0), before: convert::fmt_stamp(g.1), frames: g.2 })
+                .collect(),
+            last_frame: t(self.last_ns),
+            last_frame_before_end_s: margin(self.last_ns, end_ns),
+            node: "mesher".into(),
+            points_rejected: self.points_rejected,
+            profiles_refused: self.refused,
+            scan_id,
+            start: t(self.start_ns),
+        };
+        serde_json::to_string(&report).unwrap_or_default()
     }
 }
 

@@ -267,7 +267,7 @@ impl Component for TriangulatorNode {
                 if e.event != ScanEvent::START {
                     self.drain(out, true);
                 }
-                if let Some(report) = self.tally.event(e, "triangulator", &self.camera, "frames_placed") {
+                if let Some(report) = self.tally.event(e, crate::tally::Stage::Triangulator, &self.camera) {
                     out.publish(OUT_REPORT, report);
                 }
                 Ok(())
