@@ -13,6 +13,8 @@
 //!
 //! `XSURF_FUZZ_ITERS=N` runs N inputs per target (default `DEFAULT_ITERS`) and
 //! `XSURF_FUZZ_SEED=S` another sequence; `XSURF_FUZZ_TARGET=name` runs one target.
+// A scenario reads top to bottom: its steps stay in one test function.
+#![allow(clippy::too_many_lines)]
 #![allow(clippy::unwrap_used)]
 
 use std::collections::BTreeMap;

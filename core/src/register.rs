@@ -408,6 +408,103 @@ fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
     Some(x)
 }
 
+/// A correspondence: (observation index, reference index, signed residual along the
+/// reference's normal).
+type Match = (usize, usize, f64);
+
+/// One camera's point-to-plane ICP against the reference surface.
+struct Icp<'a> {
+    reference: &'a Reference,
+    /// The observations used (every `step`-th, at most `max_points`).
+    obs: Vec<&'a Observation>,
+    plane: &'a Plane,
+    cfg: &'a RefineConfig,
+}
+
+impl Icp<'_> {
+    /// The correspondences of placement `e`.
+    fn matches(&self, e: &Iso3) -> Vec<Match> {
+        self.obs
+            .iter()
+            .enumerate()
+            .filter_map(|(i, o)| {
+                let p = o.triangulate(e, self.plane)?;
+                let j = self.reference.nearest(p, self.cfg.max_distance_m)?;
+                Some((i, j, self.reference.normals[j].dot(p - self.reference.points[j])))
+            })
+            .collect()
+    }
+    /// The `trim_fraction` of the matches with the smallest residuals.
+    fn trimmed(&self, mut m: Vec<Match>) -> Vec<Match> {
+        m.sort_by(|a, b| a.2.abs().total_cmp(&b.2.abs()));
+        m.truncate(((m.len() as f64) * self.cfg.trim_fraction).ceil() as usize);
+        m
+    }
+    fn rms(m: &[Match]) -> f64 {
+        (m.iter().map(|x| x.2 * x.2).sum::<f64>() / m.len().max(1) as f64).sqrt()
+    }
+    /// Gauss-Newton's normal equations at placement `e`, Huber-weighted.
+    fn normal_equations(&self, m: &[Match], e: &Iso3) -> ([[f64; 6]; 6], [f64; 6]) {
+        let (mut ata, mut atb) = ([[0.0; 6]; 6], [0.0; 6]);
+        for &(i, j, r) in m {
+            let Some(jac) = self.obs[i].jacobian(e, self.plane, self.reference.normals[j]) else { continue };
+            let w = if r.abs() <= self.cfg.huber_m { 1.0 } else { self.cfg.huber_m / r.abs() };
+            for a in 0..6 {
+                for b in 0..6 {
+                    ata[a][b] += w * jac[a] * jac[b];
+                }
+                atb[a] -= w * jac[a] * r;
+            }
+        }
+        (ata, atb)
+    }
+    /// Gauss-Newton from `start` until a step moves no ray by more than a micrometre at a
+    /// metre, or `max_iterations`; the placement and the iterations taken.
+    fn solve(&self, start: &Iso3) -> Result<(Iso3, u32), RefineError> {
+        let mut e = *start;
+        let mut iterations = 0;
+        for it in 0..self.cfg.max_iterations {
+            iterations = it + 1;
+            let m = self.matches(&e);
+            if m.len() < self.cfg.min_overlap_points {
+                break;
+            }
+            let (ata, atb) = self.normal_equations(&self.trimmed(m), &e);
+            let x = solve6(ata, atb).ok_or(RefineError::Degenerate)?;
+            e = corrected(&e, &x);
+            if Vec3::new(x[0], x[1], x[2]).norm() < 1e-6 && Vec3::new(x[3], x[4], x[5]).norm() < 1e-6 {
+                break;
+            }
+        }
+        Ok((e, iterations))
+    }
+}
+
+/// The variances of the six correction parameters: the diagonal of `s2 (ata)^-1`.
+fn variances(ata: [[f64; 6]; 6], s2: f64) -> Result<Vec<f64>, RefineError> {
+    let column = |k: usize| {
+        let mut unit = [0.0; 6];
+        unit[k] = 1.0;
+        solve6(ata, unit).map(|c| c[k] * s2)
+    };
+    (0..6).map(column).collect::<Option<_>>().ok_or(RefineError::Degenerate)
+}
+
+/// How many standard deviations the correction from `before` to `after` is, along its own
+/// direction in the six parameters (the Mahalanobis norm under `ata / s2`): a shift and a turn
+/// that the data only constrain together are judged together.
+fn significance(before: &Iso3, after: &Iso3, ata: &[[f64; 6]; 6], s2: f64) -> f64 {
+    let t = after.translation - before.translation;
+    let q = after.rotation.mul_mat(&before.rotation.transpose()).to_quat();
+    let q = if q.w < 0.0 { Quat { x: -q.x, y: -q.y, z: -q.z, w: -q.w } } else { q };
+    let v = Vec3::new(q.x, q.y, q.z);
+    let angle = 2.0 * v.norm().atan2(q.w);
+    let w = v.try_normalize().map_or(Vec3::ZERO, |a| a * angle);
+    let x = [w.x, w.y, w.z, t.x, t.y, t.z];
+    let d2: f64 = (0..6).map(|a| (0..6).map(|b| x[a] * ata[a][b] * x[b]).sum::<f64>()).sum::<f64>() / s2.max(1e-30);
+    d2.max(0.0).sqrt()
+}
+
 /// Refines `carm_from_optical` of the camera whose `observations` are given against the
 /// `reference` surface, with the laser `plane` in `carm`.
 pub fn refine_camera(
@@ -418,82 +515,31 @@ pub fn refine_camera(
     cfg: &RefineConfig,
 ) -> Result<RefineReport, RefineError> {
     let step = observations.len().div_ceil(cfg.max_points.max(1)).max(1);
-    let obs: Vec<&Observation> = observations.iter().step_by(step).collect();
-    // Correspondences of the current placement: (observation index, reference index, residual).
-    let matches = |e: &Iso3| -> Vec<(usize, usize, f64)> {
-        obs.iter()
-            .enumerate()
-            .filter_map(|(i, o)| {
-                let p = o.triangulate(e, plane)?;
-                let j = reference.nearest(p, cfg.max_distance_m)?;
-                Some((i, j, reference.normals[j].dot(p - reference.points[j])))
-            })
-            .collect()
-    };
-    let trimmed = |mut m: Vec<(usize, usize, f64)>| {
-        m.sort_by(|a, b| a.2.abs().total_cmp(&b.2.abs()));
-        m.truncate(((m.len() as f64) * cfg.trim_fraction).ceil() as usize);
-        m
-    };
-    let rms = |m: &[(usize, usize, f64)]| (m.iter().map(|x| x.2 * x.2).sum::<f64>() / m.len().max(1) as f64).sqrt();
-    // Gauss-Newton's normal equations at a placement, Huber-weighted.
-    let normal_equations = |m: &[(usize, usize, f64)], e: &Iso3| {
-        let (mut ata, mut atb) = ([[0.0; 6]; 6], [0.0; 6]);
-        for &(i, j, r) in m {
-            let Some(jac) = obs[i].jacobian(e, plane, reference.normals[j]) else { continue };
-            let w = if r.abs() <= cfg.huber_m { 1.0 } else { cfg.huber_m / r.abs() };
-            for a in 0..6 {
-                for b in 0..6 {
-                    ata[a][b] += w * jac[a] * jac[b];
-                }
-                atb[a] -= w * jac[a] * r;
-            }
-        }
-        (ata, atb)
-    };
-    let first = matches(carm_from_optical);
-    let fraction = first.len() as f64 / obs.len().max(1) as f64;
+    let icp = Icp { reference, obs: observations.iter().step_by(step).collect(), plane, cfg };
+    let points = icp.obs.len();
+    let first = icp.matches(carm_from_optical);
+    let fraction = first.len() as f64 / points.max(1) as f64;
     if first.len() < cfg.min_overlap_points || fraction < cfg.min_overlap_fraction {
         return Err(RefineError::TooLittleOverlap {
             points: first.len(),
-            total: obs.len(),
+            total: points,
             max_distance_m: cfg.max_distance_m,
             min_points: cfg.min_overlap_points,
             min_fraction: cfg.min_overlap_fraction,
         });
     }
-    let rms_before = rms(&trimmed(first));
-    let mut e = *carm_from_optical;
-    let mut iterations = 0;
-    for it in 0..cfg.max_iterations {
-        iterations = it + 1;
-        let m = matches(&e);
-        if m.len() < cfg.min_overlap_points {
-            break;
-        }
-        let (ata, atb) = normal_equations(&trimmed(m), &e);
-        let x = solve6(ata, atb).ok_or(RefineError::Degenerate)?;
-        e = corrected(&e, &x);
-        // Converged when a step moves no ray by more than a micrometre at a metre.
-        if Vec3::new(x[0], x[1], x[2]).norm() < 1e-6 && Vec3::new(x[3], x[4], x[5]).norm() < 1e-6 {
-            break;
-        }
-    }
-    let all = matches(&e);
-    let overlap_fraction = all.len() as f64 / obs.len().max(1) as f64;
+    let rms_before = Icp::rms(&icp.trimmed(first));
+    let (e, iterations) = icp.solve(carm_from_optical)?;
+    let all = icp.matches(&e);
+    let overlap_fraction = all.len() as f64 / points.max(1) as f64;
     let overlap = all.len();
-    let last = trimmed(all);
-    let rms_after = rms(&last);
+    let last = icp.trimmed(all);
+    let rms_after = Icp::rms(&last);
     // The correction's uncertainty: sigma^2 (J^T W J)^-1 at the result, the residual variance
     // counted per independent measurement.
-    let (ata, _) = normal_equations(&last, &e);
+    let (ata, _) = icp.normal_equations(&last, &e);
     let s2 = rms_after * rms_after * cfg.points_per_measurement;
-    let column = |k: usize| {
-        let mut unit = [0.0; 6];
-        unit[k] = 1.0;
-        solve6(ata, unit).map(|c| c[k] * s2)
-    };
-    let var: Vec<f64> = (0..6).map(column).collect::<Option<_>>().ok_or(RefineError::Degenerate)?;
+    let var = variances(ata, s2)?;
     let sigma_rotation_deg = (var[0] + var[1] + var[2]).max(0.0).sqrt().to_degrees();
     let sigma_translation_m = (var[3] + var[4] + var[5]).max(0.0).sqrt();
     let translation_m = e.translation - carm_from_optical.translation;
@@ -509,17 +555,7 @@ pub fn refine_camera(
     if !(rms_after <= cfg.max_rms_m) || overlap < cfg.min_overlap_points {
         return Err(RefineError::PoorFit { rms_m: rms_after, iterations, max_rms_m: cfg.max_rms_m });
     }
-    // How many standard deviations the whole correction is, along its own direction in the
-    // six parameters (the Mahalanobis norm): a shift and a turn that the data only constrain
-    // together are judged together.
-    let q = e.rotation.mul_mat(&carm_from_optical.rotation.transpose()).to_quat();
-    let q = if q.w < 0.0 { Quat { x: -q.x, y: -q.y, z: -q.z, w: -q.w } } else { q };
-    let v = Vec3::new(q.x, q.y, q.z);
-    let angle = 2.0 * v.norm().atan2(q.w);
-    let w = v.try_normalize().map_or(Vec3::ZERO, |a| a * angle);
-    let x = [w.x, w.y, w.z, translation_m.x, translation_m.y, translation_m.z];
-    let d2: f64 = (0..6).map(|a| (0..6).map(|b| x[a] * ata[a][b] * x[b]).sum::<f64>()).sum::<f64>() / s2.max(1e-30);
-    let significance = d2.max(0.0).sqrt();
+    let significance = significance(carm_from_optical, &e, &ata, s2);
     let significant = significance >= cfg.min_significance;
     let reduced = rms_after <= (1.0 - cfg.min_rms_reduction) * rms_before;
     if !(significant && reduced) {
@@ -543,7 +579,7 @@ pub fn refine_camera(
         rms_before_m: rms_before,
         rms_after_m: rms_after,
         overlap_fraction,
-        points: obs.len(),
+        points,
         significance,
         sigma_translation_m,
         sigma_rotation_deg,

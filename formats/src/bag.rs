@@ -385,55 +385,18 @@ impl BagMetadata {
         let root: serde_yaml::Value = serde_yaml::from_str(text).map_err(|e| err(format!("not YAML: {e}")))?;
         let info =
             root.get("rosbag2_bagfile_information").ok_or_else(|| err("no rosbag2_bagfile_information".into()))?;
-        let num = |v: Option<&serde_yaml::Value>, what: &str| -> Result<u64, BagError> {
-            v.and_then(serde_yaml::Value::as_u64).ok_or_else(|| err(format!("missing or non-numeric {what}")))
-        };
-        let version = num(info.get("version"), "version")?;
+        let version = yaml_u64(info.get("version"), "version").map_err(err)?;
         if !(1..=9).contains(&version) {
             return Err(err(format!("metadata version {version} is not supported (1 to 9)")));
         }
-        let storage = info.get("storage_identifier").and_then(serde_yaml::Value::as_str).unwrap_or("").to_string();
-        if storage != "mcap" {
-            return Err(BagError::Unsupported {
-                path: path.to_path_buf(),
-                reason: format!(
-                    "storage {storage:?}: only mcap bags are read (convert sqlite3 bags with `ros2 bag convert`)"
-                ),
-            });
-        }
-        let compression_mode = info.get("compression_mode").and_then(serde_yaml::Value::as_str).unwrap_or("");
-        let compression_format = info.get("compression_format").and_then(serde_yaml::Value::as_str).unwrap_or("");
-        if !compression_mode.is_empty() && compression_mode != "NONE" {
-            return Err(BagError::Unsupported {
-                path: path.to_path_buf(),
-                reason: format!(
-                    "{compression_mode} {compression_format} compression (decompress with `ros2 bag decompress`)"
-                ),
-            });
-        }
-        let start_ns = num(info.get("starting_time").and_then(|s| s.get("nanoseconds_since_epoch")), "starting_time")?;
-        let duration_ns = num(info.get("duration").and_then(|s| s.get("nanoseconds")), "duration")?;
-        let message_count = num(info.get("message_count"), "message_count")?;
-        let mut topics = Vec::new();
-        for (i, t) in info
-            .get("topics_with_message_count")
-            .and_then(serde_yaml::Value::as_sequence)
-            .ok_or_else(|| err("missing topics_with_message_count".into()))?
-            .iter()
-            .enumerate()
-        {
-            let m = t.get("topic_metadata").ok_or_else(|| err(format!("topic {i}: no topic_metadata")))?;
-            let s = |k: &str| m.get(k).and_then(serde_yaml::Value::as_str).map(str::to_string);
-            let qos_value = m.get("offered_qos_profiles").cloned().unwrap_or(serde_yaml::Value::Null);
-            topics.push(TopicMetadata {
-                name: s("name").ok_or_else(|| err(format!("topic {i}: no name")))?,
-                type_name: s("type").ok_or_else(|| err(format!("topic {i}: no type")))?,
-                serialization_format: s("serialization_format").unwrap_or_else(|| "cdr".into()),
-                qos: Qos::from_metadata(&qos_value),
-                qos_text: qos_value.as_str().unwrap_or("").to_string(),
-                message_count: num(t.get("message_count"), &format!("topic {i} message_count"))?,
-            });
-        }
+        let (storage, compression) =
+            Self::check_storage(info).map_err(|reason| BagError::Unsupported { path: path.to_path_buf(), reason })?;
+        let start_ns =
+            yaml_u64(info.get("starting_time").and_then(|s| s.get("nanoseconds_since_epoch")), "starting_time")
+                .map_err(err)?;
+        let duration_ns = yaml_u64(info.get("duration").and_then(|s| s.get("nanoseconds")), "duration").map_err(err)?;
+        let message_count = yaml_u64(info.get("message_count"), "message_count").map_err(err)?;
+        let topics = Self::parse_topics(info).map_err(err)?;
         let files: Vec<String> = info
             .get("relative_file_paths")
             .and_then(serde_yaml::Value::as_sequence)
@@ -444,9 +407,66 @@ impl BagMetadata {
         if files.is_empty() {
             return Err(err("relative_file_paths is empty".into()));
         }
-        // Each file's own span, where the `files` list (version 5 on) gives one per file.
-        let file_spans: Vec<FileSpan> = info
-            .get("files")
+        Ok(BagMetadata {
+            version,
+            storage_identifier: storage,
+            start_ns,
+            duration_ns,
+            message_count,
+            topics,
+            file_spans: Self::parse_file_spans(info, files.len()),
+            files,
+            compression,
+            ros_distro: info.get("ros_distro").and_then(serde_yaml::Value::as_str).unwrap_or("").to_string(),
+        })
+    }
+
+    /// The storage (only mcap is read) and compression format (none, or only per-message
+    /// compression marked NONE, is read) of the bag's `info`; what is unsupported otherwise.
+    fn check_storage(info: &serde_yaml::Value) -> Result<(String, String), String> {
+        let storage = info.get("storage_identifier").and_then(serde_yaml::Value::as_str).unwrap_or("").to_string();
+        if storage != "mcap" {
+            return Err(format!(
+                "storage {storage:?}: only mcap bags are read (convert sqlite3 bags with `ros2 bag convert`)"
+            ));
+        }
+        let compression_mode = info.get("compression_mode").and_then(serde_yaml::Value::as_str).unwrap_or("");
+        let compression_format = info.get("compression_format").and_then(serde_yaml::Value::as_str).unwrap_or("");
+        if !compression_mode.is_empty() && compression_mode != "NONE" {
+            return Err(format!(
+                "{compression_mode} {compression_format} compression (decompress with `ros2 bag decompress`)"
+            ));
+        }
+        Ok((storage, compression_format.to_string()))
+    }
+
+    /// The topics of `topics_with_message_count`.
+    fn parse_topics(info: &serde_yaml::Value) -> Result<Vec<TopicMetadata>, String> {
+        let list = info
+            .get("topics_with_message_count")
+            .and_then(serde_yaml::Value::as_sequence)
+            .ok_or("missing topics_with_message_count")?;
+        let mut topics = Vec::new();
+        for (i, t) in list.iter().enumerate() {
+            let m = t.get("topic_metadata").ok_or_else(|| format!("topic {i}: no topic_metadata"))?;
+            let s = |k: &str| m.get(k).and_then(serde_yaml::Value::as_str).map(str::to_string);
+            let qos_value = m.get("offered_qos_profiles").cloned().unwrap_or(serde_yaml::Value::Null);
+            topics.push(TopicMetadata {
+                name: s("name").ok_or_else(|| format!("topic {i}: no name"))?,
+                type_name: s("type").ok_or_else(|| format!("topic {i}: no type"))?,
+                serialization_format: s("serialization_format").unwrap_or_else(|| "cdr".into()),
+                qos: Qos::from_metadata(&qos_value),
+                qos_text: qos_value.as_str().unwrap_or("").to_string(),
+                message_count: yaml_u64(t.get("message_count"), &format!("topic {i} message_count"))?,
+            });
+        }
+        Ok(topics)
+    }
+
+    /// Each of the `files` storage files' own span, where the `files` list (version 5 on) gives
+    /// one per file; none otherwise.
+    fn parse_file_spans(info: &serde_yaml::Value, files: usize) -> Vec<FileSpan> {
+        info.get("files")
             .and_then(serde_yaml::Value::as_sequence)
             .map(|list| {
                 list.iter()
@@ -459,21 +479,14 @@ impl BagMetadata {
                     })
                     .collect()
             })
-            .filter(|spans: &Vec<FileSpan>| spans.len() == files.len())
-            .unwrap_or_default();
-        Ok(BagMetadata {
-            version,
-            storage_identifier: storage,
-            start_ns,
-            duration_ns,
-            message_count,
-            topics,
-            files,
-            file_spans,
-            compression: compression_format.to_string(),
-            ros_distro: info.get("ros_distro").and_then(serde_yaml::Value::as_str).unwrap_or("").to_string(),
-        })
+            .filter(|spans: &Vec<FileSpan>| spans.len() == files)
+            .unwrap_or_default()
     }
+}
+
+/// A number of `metadata.yaml`, or what is wrong with it (`what` names it).
+fn yaml_u64(v: Option<&serde_yaml::Value>, what: &str) -> Result<u64, String> {
+    v.and_then(serde_yaml::Value::as_u64).ok_or_else(|| format!("missing or non-numeric {what}"))
 }
 
 /// What [`reindex`] found.

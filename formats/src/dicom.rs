@@ -64,6 +64,75 @@ fn name_of(tag: Tag) -> String {
     format!("{name} ({:04X},{:04X})", tag.0, tag.1)
 }
 
+/// A data set's encoding, from its transfer syntax.
+#[derive(Clone, Copy, PartialEq)]
+enum Syntax {
+    ExplicitLe,
+    ImplicitLe,
+    ExplicitBe,
+}
+
+impl Syntax {
+    /// The encoding of transfer syntax `uid`; `None` for a deflated data set (whose lengths are
+    /// those of the inflated stream).
+    fn of(uid: &str) -> Option<Syntax> {
+        match uid.trim_end_matches(['\0', ' ']) {
+            "1.2.840.10008.1.2" => Some(Syntax::ImplicitLe),
+            "1.2.840.10008.1.2.2" => Some(Syntax::ExplicitBe),
+            "1.2.840.10008.1.2.1.99" => None,
+            _ => Some(Syntax::ExplicitLe),
+        }
+    }
+}
+
+fn u16_at(b: &[u8], i: usize, be: bool) -> u16 {
+    let v = [b[i], b[i + 1]];
+    if be {
+        u16::from_be_bytes(v)
+    } else {
+        u16::from_le_bytes(v)
+    }
+}
+
+fn u32_at(b: &[u8], i: usize, be: bool) -> u32 {
+    let v = [b[i], b[i + 1], b[i + 2], b[i + 3]];
+    if be {
+        u32::from_be_bytes(v)
+    } else {
+        u32::from_le_bytes(v)
+    }
+}
+
+/// The VR, value length and header size of the element at `pos` (at least 8 bytes there);
+/// implicit VRs come from the dictionary, an unknown VR code is read as UN with a 4-byte length
+/// (as dicom-rs reads it).
+fn element_header(
+    b: &[u8],
+    pos: usize,
+    (group, elem): (u16, u16),
+    implicit: bool,
+    be: bool,
+) -> Result<(VR, u32, usize), String> {
+    use dicom_core::dictionary::{DataDictionary, DataDictionaryEntry};
+    const LONG_VRS: [VR; 13] =
+        [VR::OB, VR::OD, VR::OF, VR::OL, VR::OV, VR::OW, VR::SQ, VR::SV, VR::UC, VR::UN, VR::UR, VR::UT, VR::UV];
+    if implicit {
+        let vr = dicom_dictionary_std::StandardDataDictionary
+            .by_tag(Tag(group, elem))
+            .map(|e| e.vr().relaxed())
+            .unwrap_or(VR::UN);
+        return Ok((vr, u32_at(b, pos + 4, false), 8));
+    }
+    let vr = VR::from_binary([b[pos + 4], b[pos + 5]]).unwrap_or(VR::UN);
+    if !LONG_VRS.contains(&vr) {
+        return Ok((vr, u32::from(u16_at(b, pos + 6, be)), 8));
+    }
+    if b.len() - pos < 12 {
+        return Err(format!("the element header at byte offset {pos} is cut short by the end of the file"));
+    }
+    Ok((vr, u32_at(b, pos + 8, be), 12))
+}
+
 /// Checks that every element and item of a DICOM file (PS3.10: preamble, "DICM", meta group,
 /// data set) that has a defined length fits in the file, before a parser allocates that length
 /// (found by the fuzz suite: a 1 KB file whose element said 4 GB made dicom-rs fill 4 GB).
@@ -71,31 +140,6 @@ fn name_of(tag: Tag) -> String {
 /// are stepped over by their lengths. A deflated data set is checked only as far as its meta
 /// group.
 fn check_lengths(b: &[u8]) -> Result<(), String> {
-    use dicom_core::dictionary::{DataDictionary, DataDictionaryEntry};
-    #[derive(Clone, Copy, PartialEq)]
-    enum Syntax {
-        ExplicitLe,
-        ImplicitLe,
-        ExplicitBe,
-    }
-    let u16_at = |i: usize, be: bool| {
-        let v = [b[i], b[i + 1]];
-        if be {
-            u16::from_be_bytes(v)
-        } else {
-            u16::from_le_bytes(v)
-        }
-    };
-    let u32_at = |i: usize, be: bool| {
-        let v = [b[i], b[i + 1], b[i + 2], b[i + 3]];
-        if be {
-            u32::from_be_bytes(v)
-        } else {
-            u32::from_le_bytes(v)
-        }
-    };
-    const LONG_VRS: [VR; 13] =
-        [VR::OB, VR::OD, VR::OF, VR::OL, VR::OV, VR::OW, VR::SQ, VR::SV, VR::UC, VR::UN, VR::UR, VR::UT, VR::UV];
     let mut pos = 132;
     let mut syntax = Syntax::ExplicitLe;
     let mut in_meta = true;
@@ -103,26 +147,20 @@ fn check_lengths(b: &[u8]) -> Result<(), String> {
     let mut fragments = false;
     let mut transfer_syntax = String::new();
     while pos < b.len() {
-        if in_meta && (b.len() - pos < 2 || u16_at(pos, false) != 0x0002) {
+        if in_meta && (b.len() - pos < 2 || u16_at(b, pos, false) != 0x0002) {
             in_meta = false;
-            let ts = transfer_syntax.trim_end_matches(['\0', ' ']);
-            syntax = match ts {
-                "1.2.840.10008.1.2" => Syntax::ImplicitLe,
-                "1.2.840.10008.1.2.2" => Syntax::ExplicitBe,
-                // A deflated data set's lengths are those of the inflated stream.
-                "1.2.840.10008.1.2.1.99" => return Ok(()),
-                _ => Syntax::ExplicitLe,
-            };
+            let Some(s) = Syntax::of(&transfer_syntax) else { return Ok(()) };
+            syntax = s;
         }
         let be = syntax == Syntax::ExplicitBe && !in_meta;
         if b.len() - pos < 8 {
             return Err(format!("the element header at byte offset {pos} is cut short by the end of the file"));
         }
-        let (group, elem) = (u16_at(pos, be), u16_at(pos + 2, be));
+        let (group, elem) = (u16_at(b, pos, be), u16_at(b, pos + 2, be));
         let remaining = |header: usize| (b.len() - pos).saturating_sub(header);
         if group == 0xFFFE {
             // Item (E000), item delimiter (E00D), sequence delimiter (E0DD): tag and a 4-byte length.
-            let len = u32_at(pos + 4, be);
+            let len = u32_at(b, pos + 4, be);
             match elem {
                 0xE0DD => fragments = false,
                 0xE000 if len != u32::MAX => {
@@ -141,24 +179,8 @@ fn check_lengths(b: &[u8]) -> Result<(), String> {
             pos += 8;
             continue;
         }
-        let (vr, len, header) = if syntax == Syntax::ImplicitLe && !in_meta {
-            let vr = dicom_dictionary_std::StandardDataDictionary
-                .by_tag(Tag(group, elem))
-                .map(|e| e.vr().relaxed())
-                .unwrap_or(VR::UN);
-            (vr, u32_at(pos + 4, false), 8)
-        } else {
-            // An unknown VR code is read as UN, with a 4-byte length, as dicom-rs reads it.
-            let vr = VR::from_binary([b[pos + 4], b[pos + 5]]).unwrap_or(VR::UN);
-            if LONG_VRS.contains(&vr) {
-                if b.len() - pos < 12 {
-                    return Err(format!("the element header at byte offset {pos} is cut short by the end of the file"));
-                }
-                (vr, u32_at(pos + 8, be), 12)
-            } else {
-                (vr, u32::from(u16_at(pos + 6, be)), 8)
-            }
-        };
+        let implicit = syntax == Syntax::ImplicitLe && !in_meta;
+        let (vr, len, header) = element_header(b, pos, (group, elem), implicit, be)?;
         if len == u32::MAX {
             // Undefined length: a sequence, or encapsulated pixel data; walk into it.
             fragments = vr != VR::SQ;
@@ -250,99 +272,90 @@ fn stored_pixels(
     Ok(pixels)
 }
 
-/// Reads the radiograph in `path`.
-pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
-    let err = |what: String| DicomError { file: path.to_path_buf(), what };
-    if let Some(why) = crate::file_problem(path) {
-        return Err(err(why));
-    }
-    check_preamble(path).map_err(err)?;
-    let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
-    check_lengths(&bytes).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;
-    let obj = OpenFileOptions::new().open_file(path).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;
-    let ts_uid = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']).to_string();
-    let ts = TransferSyntaxRegistry
-        .get(&ts_uid)
-        .ok_or_else(|| err(format!("TransferSyntaxUID (0002,0010) {ts_uid} is unknown")))?;
-    let element = |tag: Tag| -> Result<&dicom_object::mem::InMemElement, DicomError> {
-        obj.element_opt(tag)
-            .map_err(|e| err(format!("{}: {e}", name_of(tag))))?
-            .ok_or_else(|| err(format!("{} is missing", name_of(tag))))
-    };
-    let uint = |tag: Tag| -> Result<u32, DicomError> {
-        element(tag)?.to_int::<u32>().map_err(|e| err(format!("{}: {e}", name_of(tag))))
-    };
-    let opt_f64s = |tag: Tag| -> Option<Vec<f64>> {
-        obj.element_opt(tag).ok().flatten().and_then(|e| e.to_multi_float64().ok()).filter(|v| !v.is_empty())
-    };
-    element(tags::PIXEL_DATA)?;
-    let (rows, cols) = (uint(tags::ROWS)?, uint(tags::COLUMNS)?);
-    let spp = uint(tags::SAMPLES_PER_PIXEL)?;
+/// Element `tag` of `obj`, or what is wrong with it.
+fn element(obj: &InMemDicomObject, tag: Tag) -> Result<&dicom_object::mem::InMemElement, String> {
+    obj.element_opt(tag)
+        .map_err(|e| format!("{}: {e}", name_of(tag)))?
+        .ok_or_else(|| format!("{} is missing", name_of(tag)))
+}
+
+/// Element `tag` of `obj` as an unsigned integer.
+fn uint(obj: &InMemDicomObject, tag: Tag) -> Result<u32, String> {
+    element(obj, tag)?.to_int::<u32>().map_err(|e| format!("{}: {e}", name_of(tag)))
+}
+
+/// The pixel layout a radiograph is read in.
+struct PixelFormat {
+    rows: u32,
+    cols: u32,
+    bits_allocated: u32,
+    bits_stored: u32,
+    monochrome1: bool,
+}
+
+/// The pixel layout of `obj`, checked: one sample per pixel, 8- or 16-bit, MONOCHROME1 or 2,
+/// and a decoded size bounded before decoding allocates it (a damaged Rows, Columns or Number
+/// of Frames must not cost gigabytes): at most 1 GiB, and for compressed pixel data (`encapsulated`) at most
+/// 256 times the file's size of `file_len` bytes (or 64 MiB).
+fn pixel_format(obj: &InMemDicomObject, encapsulated: bool, file_len: usize) -> Result<PixelFormat, String> {
+    element(obj, tags::PIXEL_DATA)?;
+    let (rows, cols) = (uint(obj, tags::ROWS)?, uint(obj, tags::COLUMNS)?);
+    let spp = uint(obj, tags::SAMPLES_PER_PIXEL)?;
     if spp != 1 {
-        return Err(err(format!(
+        return Err(format!(
             "{} is {spp}: a radiograph must be greyscale (1 sample per pixel)",
             name_of(tags::SAMPLES_PER_PIXEL)
-        )));
+        ));
     }
-    let bits_allocated = uint(tags::BITS_ALLOCATED)?;
-    let bits_stored = uint(tags::BITS_STORED)?;
-    // What decoding would allocate, bounded before it does (a damaged Rows, Columns or Number of
-    // Frames must not cost gigabytes): at most 1 GiB, and for compressed pixel data at most
-    // 256 times the file's size (or 64 MiB).
+    let bits_allocated = uint(obj, tags::BITS_ALLOCATED)?;
+    let bits_stored = uint(obj, tags::BITS_STORED)?;
     let frames = obj
         .element_opt(tags::NUMBER_OF_FRAMES)
         .ok()
         .flatten()
-        .map(|e| e.to_int::<u32>().map_err(|e| err(format!("{}: {e}", name_of(tags::NUMBER_OF_FRAMES)))))
+        .map(|e| e.to_int::<u32>().map_err(|e| format!("{}: {e}", name_of(tags::NUMBER_OF_FRAMES))))
         .transpose()?
         .unwrap_or(1);
     let decoded = u64::from(rows) * u64::from(cols) * u64::from(frames.max(1)) * u64::from(bits_allocated.div_ceil(8));
-    let limit = if ts.is_encapsulated_pixel_data() {
-        (bytes.len() as u64).saturating_mul(256).clamp(64 << 20, 1 << 30)
-    } else {
-        1 << 30
-    };
+    let limit = if encapsulated { (file_len as u64).saturating_mul(256).clamp(64 << 20, 1 << 30) } else { 1 << 30 };
     if decoded > limit {
-        return Err(err(format!(
-            "{rows}x{cols} pixels ({}, {}) in {frames} frame(s) would decode to {decoded} bytes, more than the {limit} a file of {} bytes may hold",
+        return Err(format!(
+            "{rows}x{cols} pixels ({}, {}) in {frames} frame(s) would decode to {decoded} bytes, more than the {limit} a file of {file_len} bytes may hold",
             name_of(tags::ROWS),
             name_of(tags::COLUMNS),
-            bytes.len()
-        )));
+        ));
     }
     if !matches!(bits_allocated, 8 | 16) || !(1..=bits_allocated).contains(&bits_stored) {
-        return Err(err(format!(
+        return Err(format!(
             "{} {bits_allocated} with {} {bits_stored}: only 8- to 16-bit greyscale is supported",
             name_of(tags::BITS_ALLOCATED),
             name_of(tags::BITS_STORED)
-        )));
+        ));
     }
-    let photometric = element(tags::PHOTOMETRIC_INTERPRETATION)?
+    let photometric = element(obj, tags::PHOTOMETRIC_INTERPRETATION)?
         .to_str()
-        .map_err(|e| err(format!("{}: {e}", name_of(tags::PHOTOMETRIC_INTERPRETATION))))?
+        .map_err(|e| format!("{}: {e}", name_of(tags::PHOTOMETRIC_INTERPRETATION)))?
         .trim()
         .to_string();
     let monochrome1 = match photometric.as_str() {
         "MONOCHROME1" => true,
         "MONOCHROME2" => false,
         other => {
-            return Err(err(format!(
+            return Err(format!(
                 "{} is {other}: a radiograph must be MONOCHROME1 or MONOCHROME2",
                 name_of(tags::PHOTOMETRIC_INTERPRETATION)
-            )))
+            ))
         }
     };
-    if ts.is_encapsulated_pixel_data() && !ts.can_decode_all() {
-        return Err(err(format!(
-            "{}: transfer syntax {ts_uid} ({}) is not supported (supported: uncompressed, deflate, RLE, JPEG baseline/extended/lossless)",
-            name_of(tags::PIXEL_DATA),
-            ts.name()
-        )));
-    }
-    let px = obj.decode_pixel_data().map_err(|e| err(format!("{}: {e}", name_of(tags::PIXEL_DATA))))?;
+    Ok(PixelFormat { rows, cols, bits_allocated, bits_stored, monochrome1 })
+}
+
+/// The radiograph from the decoded pixel data: the stored bits, the rescale (with signed
+/// pixels' offset moved into its intercept), the first window and the first VOI LUT.
+fn radiograph(px: &dicom_pixeldata::DecodedPixelData<'_>, f: &PixelFormat) -> Result<Radiograph, String> {
     let signed = matches!(px.pixel_representation(), dicom_pixeldata::PixelRepresentation::Signed);
     let intercept_offset = if signed { -32768.0 } else { 0.0 };
-    let pixels = stored_pixels(px.data(), (rows, cols), bits_allocated, bits_stored, signed).map_err(err)?;
+    let pixels = stored_pixels(px.data(), (f.rows, f.cols), f.bits_allocated, f.bits_stored, signed)?;
     let rescale = px.rescale().ok().and_then(|r| r.first().copied());
     let (slope, intercept) = rescale.map_or((1.0, 0.0), |r| (r.slope, r.intercept));
     let window = px
@@ -360,18 +373,26 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
         data: l.data,
     });
     let image = Radiograph {
-        width: cols,
-        height: rows,
+        width: f.cols,
+        height: f.rows,
         pixels,
-        bits_stored: if signed { 16 } else { bits_stored as u8 },
-        monochrome1,
+        bits_stored: if signed { 16 } else { f.bits_stored as u8 },
+        monochrome1: f.monochrome1,
         rescale_slope: slope,
         rescale_intercept: intercept + slope * intercept_offset,
         window,
         voi_lut,
     };
-    image.validate().map_err(|e| err(e.to_string()))?;
-    let info = XrayInfo {
+    image.validate().map_err(|e| e.to_string())?;
+    Ok(image)
+}
+
+/// The acquisition facts of `obj`, those it has.
+fn xray_info(obj: &InMemDicomObject) -> XrayInfo {
+    let opt_f64s = |tag: Tag| -> Option<Vec<f64>> {
+        obj.element_opt(tag).ok().flatten().and_then(|e| e.to_multi_float64().ok()).filter(|v| !v.is_empty())
+    };
+    XrayInfo {
         acquisition_start_ns: obj
             .element_opt(tags::ACQUISITION_DATE_TIME)
             .ok()
@@ -383,8 +404,34 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
         pixel_spacing_m: opt_f64s(tags::IMAGER_PIXEL_SPACING)
             .filter(|v| v.len() == 2)
             .map(|v| [v[0] * 1e-3, v[1] * 1e-3]),
-    };
-    Ok(XrayFile { image, info, transfer_syntax: ts_uid })
+    }
+}
+
+/// Reads the radiograph in `path`.
+pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
+    let err = |what: String| DicomError { file: path.to_path_buf(), what };
+    if let Some(why) = crate::file_problem(path) {
+        return Err(err(why));
+    }
+    check_preamble(path).map_err(err)?;
+    let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
+    check_lengths(&bytes).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;
+    let obj = OpenFileOptions::new().open_file(path).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;
+    let ts_uid = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']).to_string();
+    let ts = TransferSyntaxRegistry
+        .get(&ts_uid)
+        .ok_or_else(|| err(format!("TransferSyntaxUID (0002,0010) {ts_uid} is unknown")))?;
+    let format = pixel_format(&obj, ts.is_encapsulated_pixel_data(), bytes.len()).map_err(err)?;
+    if ts.is_encapsulated_pixel_data() && !ts.can_decode_all() {
+        return Err(err(format!(
+            "{}: transfer syntax {ts_uid} ({}) is not supported (supported: uncompressed, deflate, RLE, JPEG baseline/extended/lossless)",
+            name_of(tags::PIXEL_DATA),
+            ts.name()
+        )));
+    }
+    let px = obj.decode_pixel_data().map_err(|e| err(format!("{}: {e}", name_of(tags::PIXEL_DATA))))?;
+    let image = radiograph(&px, &format).map_err(err)?;
+    Ok(XrayFile { image, info: xray_info(&obj), transfer_syntax: ts_uid })
 }
 
 /// Parses a DICOM DT value (`YYYYMMDDHHMMSS.FFFFFF&ZZXX`, trailing parts optional) to ns since

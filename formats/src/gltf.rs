@@ -68,15 +68,24 @@ impl Builder {
     }
 }
 
-/// Writes the scene as a `.glb`.
-pub fn write(w: &mut impl Write, scene: &Scene<'_>) -> std::io::Result<()> {
-    let mut b = Builder::default();
-    let (mut meshes, mut materials, mut nodes) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut images, mut textures, mut samplers) = (Vec::new(), Vec::new(), Vec::new());
-    for s in &scene.surfaces {
+/// The glTF document's arrays, filled surface by surface.
+#[derive(Default)]
+struct Doc {
+    meshes: Vec<Value>,
+    materials: Vec<Value>,
+    nodes: Vec<Value>,
+    images: Vec<Value>,
+    textures: Vec<Value>,
+    samplers: Vec<Value>,
+}
+
+impl Doc {
+    /// A surface: its mesh (positions, normals and colours when it has them), a material with
+    /// its transparency, and a node. Empty surfaces are left out.
+    fn surface(&mut self, b: &mut Builder, s: &crate::scene::Surface<'_>) {
         let m = s.mesh;
         if m.triangles.is_empty() || m.positions.is_empty() {
-            continue;
+            return;
         }
         let mut attrs = json!({"POSITION": b.vec3(&m.positions, true)});
         if m.normals.len() == m.positions.len() {
@@ -95,16 +104,18 @@ pub fn write(w: &mut impl Write, scene: &Scene<'_>) -> std::io::Result<()> {
         }
         let indices = b.indices(&m.triangles);
         let alpha = 1.0 - s.transparency.clamp(0.0, 1.0);
-        materials.push(json!({
+        self.materials.push(json!({
             "name": s.name,
             "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, alpha], "metallicFactor": 0.0, "roughnessFactor": 0.9},
             "alphaMode": if alpha < 1.0 { "BLEND" } else { "OPAQUE" },
             "doubleSided": true
         }));
-        meshes.push(json!({"name": s.name, "primitives": [{"attributes": attrs, "indices": indices, "material": materials.len() - 1}]}));
-        nodes.push(json!({"name": s.name, "mesh": meshes.len() - 1}));
+        self.meshes.push(json!({"name": s.name, "primitives": [{"attributes": attrs, "indices": indices, "material": self.materials.len() - 1}]}));
+        self.nodes.push(json!({"name": s.name, "mesh": self.meshes.len() - 1}));
     }
-    if let Some(p) = scene.plane.as_ref().filter(|p| !p.triangles.is_empty() && p.uv.len() == p.positions.len()) {
+
+    /// The radiograph's plane, textured with its PNG.
+    fn plane(&mut self, b: &mut Builder, p: &crate::scene::TexturedPlane) {
         let pos = b.vec3(&p.positions, true);
         // glTF's texture origin is the image's top-left; the plane's is bottom-left.
         let uv: Vec<u8> =
@@ -112,40 +123,59 @@ pub fn write(w: &mut impl Write, scene: &Scene<'_>) -> std::io::Result<()> {
         let tex = b.accessor(&uv, ARRAY_BUFFER, FLOAT, "VEC2", p.uv.len(), json!({}));
         let idx = b.indices(&p.triangles);
         let view = b.view(&p.png, None);
-        images.push(json!({"bufferView": view, "mimeType": "image/png", "name": p.file_name}));
-        samplers.push(json!({"magFilter": 9729, "minFilter": 9729, "wrapS": 33071, "wrapT": 33071}));
-        textures.push(json!({"source": 0, "sampler": 0}));
-        materials.push(json!({
+        self.images.push(json!({"bufferView": view, "mimeType": "image/png", "name": p.file_name}));
+        self.samplers.push(json!({"magFilter": 9729, "minFilter": 9729, "wrapS": 33071, "wrapT": 33071}));
+        self.textures.push(json!({"source": 0, "sampler": 0}));
+        self.materials.push(json!({
             "name": "xray",
             "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicFactor": 0.0, "roughnessFactor": 1.0},
             "doubleSided": true
         }));
-        meshes.push(json!({"name": "xray", "primitives": [{"attributes": {"POSITION": pos, "TEXCOORD_0": tex}, "indices": idx, "material": materials.len() - 1}]}));
-        nodes.push(json!({"name": "xray", "mesh": meshes.len() - 1}));
+        self.meshes.push(json!({"name": "xray", "primitives": [{"attributes": {"POSITION": pos, "TEXCOORD_0": tex}, "indices": idx, "material": self.materials.len() - 1}]}));
+        self.nodes.push(json!({"name": "xray", "mesh": self.meshes.len() - 1}));
     }
-    let children: Vec<usize> = (0..nodes.len()).collect();
-    nodes.push(json!({"name": "table", "rotation": [-std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2], "children": children}));
-    let mut doc = json!({
-        "asset": {"version": "2.0", "generator": "xsurf"},
-        "scene": 0,
-        "scenes": [{"name": "xsurf", "nodes": [nodes.len() - 1]}],
-        "nodes": nodes,
-    });
-    if !meshes.is_empty() {
-        while !b.bin.len().is_multiple_of(4) {
-            b.bin.push(0);
+
+    /// The JSON document: every node under a `table` node that turns the table frame (z up)
+    /// into glTF's (y up); the binary buffer padded to 4 bytes.
+    fn json(mut self, b: &mut Builder) -> Value {
+        let children: Vec<usize> = (0..self.nodes.len()).collect();
+        self.nodes.push(json!({"name": "table", "rotation": [-std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2], "children": children}));
+        let mut doc = json!({
+            "asset": {"version": "2.0", "generator": "xsurf"},
+            "scene": 0,
+            "scenes": [{"name": "xsurf", "nodes": [self.nodes.len() - 1]}],
+            "nodes": self.nodes,
+        });
+        if !self.meshes.is_empty() {
+            while !b.bin.len().is_multiple_of(4) {
+                b.bin.push(0);
+            }
+            doc["meshes"] = json!(self.meshes);
+            doc["materials"] = json!(self.materials);
+            doc["accessors"] = json!(b.accessors);
+            doc["bufferViews"] = json!(b.views);
+            doc["buffers"] = json!([{"byteLength": b.bin.len()}]);
         }
-        doc["meshes"] = json!(meshes);
-        doc["materials"] = json!(materials);
-        doc["accessors"] = json!(b.accessors);
-        doc["bufferViews"] = json!(b.views);
-        doc["buffers"] = json!([{"byteLength": b.bin.len()}]);
+        if !self.images.is_empty() {
+            doc["images"] = json!(self.images);
+            doc["textures"] = json!(self.textures);
+            doc["samplers"] = json!(self.samplers);
+        }
+        doc
     }
-    if !images.is_empty() {
-        doc["images"] = json!(images);
-        doc["textures"] = json!(textures);
-        doc["samplers"] = json!(samplers);
+}
+
+/// Writes the scene as a `.glb`.
+pub fn write(w: &mut impl Write, scene: &Scene<'_>) -> std::io::Result<()> {
+    let mut b = Builder::default();
+    let mut doc = Doc::default();
+    for s in &scene.surfaces {
+        doc.surface(&mut b, s);
     }
+    if let Some(p) = scene.plane.as_ref().filter(|p| !p.triangles.is_empty() && p.uv.len() == p.positions.len()) {
+        doc.plane(&mut b, p);
+    }
+    let doc = doc.json(&mut b);
     let mut js = serde_json::to_vec(&doc).map_err(std::io::Error::other)?;
     while !js.len().is_multiple_of(4) {
         js.push(b' ');

@@ -77,9 +77,18 @@ fn give_up_after(timeout: Duration, node_name: &str, env: &DdsEnv) -> anyhow::Re
     Ok(())
 }
 
-/// Runs `param` with its arguments (`--timeout S` anywhere: how long to wait for the node);
-/// prints the answer on stdout.
-pub fn run(args: &[String]) -> anyhow::Result<()> {
+/// What `param` asks a node.
+enum Request {
+    /// `list NODE`.
+    List,
+    /// `get NODE NAME`.
+    Get(String),
+    /// `set NODE NAME VALUE`.
+    Set(String, String),
+}
+
+/// `param`'s arguments: how long to wait, the node's fully qualified name and the request.
+fn parse_args(args: &[String]) -> anyhow::Result<(Duration, String, Request)> {
     let mut args = args.to_vec();
     let mut timeout = TIMEOUT;
     if let Some(i) = args.iter().position(|a| a == "--timeout") {
@@ -99,11 +108,21 @@ pub fn run(args: &[String]) -> anyhow::Result<()> {
     if !node_name.starts_with('/') {
         return Err(usage(format!("node {node_name:?}: give the fully qualified name, e.g. /cam1/edge_detector")));
     }
-    match (verb, rest.len()) {
-        ("list", 0) | ("get", 1) | ("set", 2) => {}
+    let request = match (verb, rest) {
+        ("list", []) => Request::List,
+        ("get", [name]) => Request::Get(name.clone()),
+        ("set", [name, value]) => Request::Set(name.clone(), value.clone()),
         ("list" | "get" | "set", _) => return Err(usage(format!("param {verb}: wrong number of arguments"))),
         _ => return Err(usage(format!("param {verb:?}: expected list, get or set"))),
-    }
+    };
+    Ok((timeout, node_name.to_string(), request))
+}
+
+/// Runs `param` with its arguments (`--timeout S` anywhere: how long to wait for the node);
+/// prints the answer on stdout.
+pub fn run(args: &[String]) -> anyhow::Result<()> {
+    let (timeout, node_name, request) = parse_args(args)?;
+    let node_name = node_name.as_str();
     let env = DdsEnv::from_env(|k| std::env::var(k).ok())?;
     let ctx = env.context()?;
     let mut node = ctx
@@ -115,8 +134,8 @@ pub fn run(args: &[String]) -> anyhow::Result<()> {
     let spinner = node.spinner().map_err(|e| anyhow!("spinner: {e:?}"))?;
     std::thread::Builder::new().name("spinner".into()).spawn(move || futures::executor::block_on(spinner.spin()))?;
     give_up_after(timeout, node_name, &env)?;
-    match (verb, rest) {
-        ("list", []) => {
+    match request {
+        Request::List => {
             let c = client::<ListParametersRequest, ListParametersResponse>(
                 &mut node,
                 node_name,
@@ -130,7 +149,7 @@ pub fn run(args: &[String]) -> anyhow::Result<()> {
                 println!("  {n}");
             }
         }
-        ("get", [name]) => {
+        Request::Get(name) => {
             let c = client::<GetParametersRequest, GetParametersResponse>(
                 &mut node,
                 node_name,
@@ -145,26 +164,23 @@ pub fn run(args: &[String]) -> anyhow::Result<()> {
                 None => bail!("parameter {name} is not set on {node_name}"),
             }
         }
-        ("set", [name, value]) => {
-            let v = ParamValue::parse(value).map_err(|e| usage(format!("value {value:?}: {e}")))?;
-            let c = client::<SetParametersRequest, SetParametersResponse>(
-                &mut node,
-                node_name,
-                "set_parameters",
-                "SetParameters",
-            )?;
-            let req =
-                SetParametersRequest { parameter: vec![Parameter { name: name.clone(), value: to_ros(&v) }.into()] };
-            let r = call(&node, &c, req)?;
-            let res = r.results.into_iter().next().context("no result returned")?;
-            if !res.successful {
-                // As `ros2 param set` prints it; the error line then does not repeat the reason.
-                println!("Setting parameter failed: {}", res.reason);
-                bail!("{node_name} refused {name} = {value} (the reason above)");
-            }
-            println!("Set parameter successful");
-        }
-        _ => return Err(usage("param list NODE | get NODE NAME | set NODE NAME VALUE")),
+        Request::Set(name, value) => set(&mut node, node_name, &name, &value)?,
     }
+    Ok(())
+}
+
+/// `param set NODE NAME VALUE`, answered as `ros2 param set` answers.
+fn set(node: &mut ros2_client::Node, node_name: &str, name: &str, value: &str) -> anyhow::Result<()> {
+    let v = ParamValue::parse(value).map_err(|e| usage(format!("value {value:?}: {e}")))?;
+    let c = client::<SetParametersRequest, SetParametersResponse>(node, node_name, "set_parameters", "SetParameters")?;
+    let req = SetParametersRequest { parameter: vec![Parameter { name: name.to_string(), value: to_ros(&v) }.into()] };
+    let r = call(node, &c, req)?;
+    let res = r.results.into_iter().next().context("no result returned")?;
+    if !res.successful {
+        // As `ros2 param set` prints it; the error line then does not repeat the reason.
+        println!("Setting parameter failed: {}", res.reason);
+        bail!("{node_name} refused {name} = {value} (the reason above)");
+    }
+    println!("Set parameter successful");
     Ok(())
 }

@@ -236,34 +236,26 @@ fn solve_views(
     Ok(lm::solve(&problem, state, cfg.max_iterations))
 }
 
-/// Calibrates a camera of `width x height` pixels from the board's corners in each view
-/// (`views[i]` in board order, see [`BoardSpec`]).
-pub fn calibrate(
+/// The solution after outlier rejection, the views used (indices) and each view's reason for
+/// rejection.
+type Kept = (lm::Solution<State>, Vec<usize>, Vec<Option<String>>);
+
+/// Views fewer than this leave the focal length and centre undetermined.
+const NEEDED_VIEWS: usize = 3;
+
+/// The views kept after rejecting outliers one at a time, worst first, re-solving after each:
+/// a view whose reprojection RMS is beyond `outlier_factor` times the median (and the floor)
+/// goes while more than [`NEEDED_VIEWS`] remain. Returns the last solution, the views used
+/// (indices into `views`) and each view's reason for rejection.
+fn reject_outliers(
     spec: &BoardSpec,
     views: &[Vec<[f64; 2]>],
-    width: u32,
-    height: u32,
+    size: (u32, u32),
     cfg: &IntrinsicsConfig,
-) -> Result<IntrinsicsResult, CalibError> {
-    const NEEDED: usize = 3;
-    if let Some(v) = views.iter().position(|v| v.len() != spec.len()) {
-        return Err(CalibError::Degenerate(format!(
-            "view {v} has {} corners, the board {}",
-            views[v].len(),
-            spec.len()
-        )));
-    }
-    if views.len() < NEEDED {
-        return Err(CalibError::TooFewViews {
-            what: "intrinsics",
-            usable: views.len(),
-            needed: NEEDED,
-            reasons: String::new(),
-        });
-    }
+    mut sol: lm::Solution<State>,
+) -> Result<Kept, CalibError> {
     let all: Vec<&[[f64; 2]]> = views.iter().map(|v| v.as_slice()).collect();
-    let mut sol = solve_views(spec, &all, (width, height), cfg, None)?;
-    let problem = Intrinsics { spec, views: all.clone(), model: cfg.model };
+    let problem = Intrinsics { spec, views: all, model: cfg.model };
     let per_view = |s: &State, used: &[usize]| -> Vec<f64> {
         used.iter()
             .enumerate()
@@ -281,7 +273,6 @@ pub fn calibrate(
     };
     let mut used: Vec<usize> = (0..views.len()).collect();
     let mut rejected: Vec<Option<String>> = vec![None; views.len()];
-    // Reject outliers one at a time, worst first, re-solving after each.
     loop {
         let errs = per_view(&sol.state, &used);
         let mut sorted = errs.clone();
@@ -289,7 +280,7 @@ pub fn calibrate(
         let median = sorted[sorted.len() / 2];
         let limit = (cfg.outlier_factor * median).max(cfg.outlier_floor_px);
         let Some((worst, &e)) = errs.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) else { break };
-        if e <= limit || used.len() <= NEEDED {
+        if e <= limit || used.len() <= NEEDED_VIEWS {
             break;
         }
         rejected[used[worst]] = Some(format!(
@@ -301,8 +292,39 @@ pub fn calibrate(
         poses.remove(worst);
         let sub: Vec<&[[f64; 2]]> = used.iter().map(|&v| views[v].as_slice()).collect();
         let start = sol.state.clone();
-        sol = solve_views(spec, &sub, (width, height), cfg, Some((&start, &poses)))?;
+        sol = solve_views(spec, &sub, size, cfg, Some((&start, &poses)))?;
     }
+    Ok((sol, used, rejected))
+}
+
+/// Calibrates a camera of `width x height` pixels from the board's corners in each view
+/// (`views[i]` in board order, see [`BoardSpec`]).
+pub fn calibrate(
+    spec: &BoardSpec,
+    views: &[Vec<[f64; 2]>],
+    width: u32,
+    height: u32,
+    cfg: &IntrinsicsConfig,
+) -> Result<IntrinsicsResult, CalibError> {
+    if let Some(v) = views.iter().position(|v| v.len() != spec.len()) {
+        return Err(CalibError::Degenerate(format!(
+            "view {v} has {} corners, the board {}",
+            views[v].len(),
+            spec.len()
+        )));
+    }
+    if views.len() < NEEDED_VIEWS {
+        return Err(CalibError::TooFewViews {
+            what: "intrinsics",
+            usable: views.len(),
+            needed: NEEDED_VIEWS,
+            reasons: String::new(),
+        });
+    }
+    let all: Vec<&[[f64; 2]]> = views.iter().map(|v| v.as_slice()).collect();
+    let sol = solve_views(spec, &all, (width, height), cfg, None)?;
+    let (sol, used, rejected) = reject_outliers(spec, views, (width, height), cfg, sol)?;
+    let problem = Intrinsics { spec, views: all, model: cfg.model };
     let s = &sol.state;
     let model = CameraModel {
         width,

@@ -372,6 +372,8 @@ impl Component for CameraDriverNode {
 
 #[cfg(test)]
 mod tests {
+    // A scenario reads top to bottom: its steps stay in one test function.
+    #![allow(clippy::too_many_lines)]
     use super::*;
     use xsurf_core::synth::{LaserModel, ScanSettings, Scanner};
     use crate::registry::{build, declarations};

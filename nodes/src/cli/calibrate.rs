@@ -702,44 +702,69 @@ fn cmd_scan(args: &[String]) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `xsurf calibrate synth DIR`: a calibration set rendered from the study's rig, with the
-/// true rig and the commands that calibrate from it.
-fn synth(args: &[String]) -> anyhow::Result<()> {
-    let o = Opts::parse(args, &["--size", "--board", "--square", "--views", "--noise", "--seed", "--preset"], None)?;
-    let [dir] = &o.positional[..] else { return Err(usage("calibrate synth needs one output folder")) };
-    let name = o.get("--preset").unwrap_or("ideal");
-    let preset = Preset::parse(name).ok_or_else(|| usage(format!("--preset {name:?}: ideal or hard")))?;
-    let hard = preset == Preset::Hard;
-    let (w, h) = match o.get("--size").unwrap_or("640x480").split_once('x') {
-        Some((a, b)) => (
-            a.parse::<u32>().map_err(|_| usage("--size: bad width"))?,
-            b.parse::<u32>().map_err(|_| usage("--size: bad height"))?,
-        ),
-        None => return Err(usage("--size: expected WxH")),
-    };
-    if !xsurf_core::limits::image_side_ok(w) || !xsurf_core::limits::image_side_ok(h) {
-        return Err(usage(format!("--size: width and height in {}", xsurf_core::limits::image_side_text())));
+/// What `xsurf calibrate synth` renders, from its options.
+struct SynthSet {
+    dir: std::path::PathBuf,
+    spec: BoardSpec,
+    square: f64,
+    size: (u32, u32),
+    /// Board views per camera.
+    count: usize,
+    noise: f64,
+    seed: u64,
+    preset: Preset,
+    exposure: Exposure,
+    /// The board's look in the intrinsics views and on the table.
+    looks: (BoardLook, BoardLook),
+    /// The board views' file type: the hard set's are JPEG at quality 75, as most calibration
+    /// sets are.
+    ext: &'static str,
+}
+
+impl SynthSet {
+    fn parse(args: &[String]) -> anyhow::Result<SynthSet> {
+        let o =
+            Opts::parse(args, &["--size", "--board", "--square", "--views", "--noise", "--seed", "--preset"], None)?;
+        let [dir] = &o.positional[..] else { return Err(usage("calibrate synth needs one output folder")) };
+        let name = o.get("--preset").unwrap_or("ideal");
+        let preset = Preset::parse(name).ok_or_else(|| usage(format!("--preset {name:?}: ideal or hard")))?;
+        let hard = preset == Preset::Hard;
+        let (w, h) = match o.get("--size").unwrap_or("640x480").split_once('x') {
+            Some((a, b)) => (
+                a.parse::<u32>().map_err(|_| usage("--size: bad width"))?,
+                b.parse::<u32>().map_err(|_| usage("--size: bad height"))?,
+            ),
+            None => return Err(usage("--size: expected WxH")),
+        };
+        if !xsurf_core::limits::image_side_ok(w) || !xsurf_core::limits::image_side_ok(h) {
+            return Err(usage(format!("--size: width and height in {}", xsurf_core::limits::image_side_text())));
+        }
+        let board = o.get("--board").unwrap_or("9x6");
+        let square = o.num("--square", 0.02765)?;
+        let spec = BoardSpec::parse(board, square).map_err(|e| usage(format!("--board/--square: {e}")))?;
+        let count = o.whole("--views", 20)?;
+        if !(3..=500).contains(&count) {
+            return Err(usage(format!("--views {count}: from 3 to 500 board views (intrinsics need 3 or more)")));
+        }
+        let noise = o.num("--noise", 2.0)?;
+        let look = if hard { BoardLook::hard() } else { BoardLook::default() };
+        Ok(SynthSet {
+            dir: dir.into(),
+            spec,
+            square,
+            size: (w, h),
+            count: count as usize,
+            noise,
+            seed: o.whole("--seed", 1)?,
+            preset,
+            exposure: if hard { Exposure::hard() } else { Exposure { noise_sigma: noise, ..Exposure::default() } },
+            looks: (look.clone(), BoardLook { background: 0.85, ..look }),
+            ext: if hard { "jpg" } else { "png" },
+        })
     }
-    let board = o.get("--board").unwrap_or("9x6");
-    let square = o.num("--square", 0.02765)?;
-    let spec = BoardSpec::parse(board, square).map_err(|e| usage(format!("--board/--square: {e}")))?;
-    let count = o.whole("--views", 20)?;
-    if !(3..=500).contains(&count) {
-        return Err(usage(format!("--views {count}: from 3 to 500 board views (intrinsics need 3 or more)")));
-    }
-    let count = count as usize;
-    let noise = o.num("--noise", 2.0)?;
-    let seed = o.whole("--seed", 1)?;
-    let truth = Rig::study(w, h);
-    let exposure = if hard { Exposure::hard() } else { Exposure { noise_sigma: noise, ..Exposure::default() } };
-    let (look, table_look) = if hard {
-        (BoardLook::hard(), BoardLook { background: 0.85, ..BoardLook::hard() })
-    } else {
-        (BoardLook::default(), BoardLook { background: 0.85, ..BoardLook::default() })
-    };
-    // The hard set's board views are JPEG at quality 75, as most calibration sets are.
-    let ext = if hard { "jpg" } else { "png" };
-    let png = |path: &Path, img: &xsurf_core::image::Image| -> anyhow::Result<()> {
+
+    /// Writes `img` as a JPEG or PNG, by `path`'s extension.
+    fn write_image(path: &Path, img: &xsurf_core::image::Image) -> anyhow::Result<()> {
         if path.extension().is_some_and(|e| e == "jpg") {
             xsurf_formats::frames::write_jpeg(path, img, SYNTH_JPEG_QUALITY)?;
         } else {
@@ -752,7 +777,96 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
             )?;
         }
         Ok(())
-    };
+    }
+
+    /// The head of calibrate.sh. The script calls the binary that wrote it (xsurf need not be
+    /// on PATH after a plain build); XSURF overrides it.
+    fn script_head(&self) -> String {
+        let exe = std::env::current_exe().ok().and_then(|p| p.to_str().map(str::to_owned)).map_or_else(
+            || "xsurf".to_string(),
+            // Escaped for its place inside double quotes in the script.
+            |p| p.chars().flat_map(|c| if "\"$`\\".contains(c) { vec!['\\', c] } else { vec![c] }).collect(),
+        );
+        format!(
+            "#!/usr/bin/env bash\n# Calibrates the rig from this set (written by `xsurf calibrate synth`); compare rig.yaml with truth_rig.yaml.\n# XSURF=/path/to/xsurf runs another xsurf than the one that wrote it.\nset -euo pipefail\ncd \"$(dirname \"$0\")\"\nXSURF=\"${{XSURF:-{exe}}}\"\nB=\"--board {}x{} --square {}\"\n",
+            self.spec.cols, self.spec.rows, self.square
+        )
+    }
+
+    /// Camera `ci`'s images: board views for its intrinsics, the board on the table at
+    /// [`SYNTH_TRAVELS`] for its placement, the laser on the tabletop at [`SYNTH_HEIGHTS`].
+    /// Returns its intrinsics command and its arguments to the placement and laser commands.
+    fn camera(
+        &self,
+        truth: &Rig,
+        ci: usize,
+        board_pose: &xsurf_core::geom::Iso3,
+    ) -> anyhow::Result<(String, String, String)> {
+        let (dir, spec, ext, count, seed) = (&self.dir, &self.spec, self.ext, self.count, self.seed);
+        let cam = &truth.cameras[ci];
+        let model = cam.model()?;
+        let rays = RayTable::new(&model);
+        let poses = board_views(&model, spec, count, seed + 1000 * ci as u64);
+        if poses.len() < count {
+            return Err(usage(format!(
+                "--size {}x{}: the {}x{} board fits in view only {} of {count} times (a larger image, or fewer --views)",
+                self.size.0,
+                self.size.1,
+                spec.cols,
+                spec.rows,
+                poses.len()
+            )));
+        }
+        for (i, pose) in poses.iter().enumerate() {
+            let img = render_board(&rays, pose, spec, &self.looks.0, &self.exposure, seed ^ ((ci * 100 + i) as u64));
+            Self::write_image(&dir.join(format!("intrinsics/{}_{i:02}.{ext}", cam.name)), &img)?;
+        }
+        let intrinsics = format!("\"$XSURF\" calibrate intrinsics $B -o {0}.yaml intrinsics/{0}_*.{ext}\n", cam.name);
+        let mut names = Vec::new();
+        for (i, &t) in SYNTH_TRAVELS.iter().enumerate() {
+            let pose = table_from_carm(t, 0.0, 0.0).compose(&cam.carm_from_optical()).inverse().compose(board_pose);
+            let img =
+                render_board(&rays, &pose, spec, &self.looks.1, &self.exposure, seed ^ ((ci * 100 + 50 + i) as u64));
+            let name = format!("placement/{}_{i}.{ext}", cam.name);
+            Self::write_image(&dir.join(&name), &img)?;
+            names.push(name);
+        }
+        let travels: Vec<String> = SYNTH_TRAVELS.iter().map(|t| t.to_string()).collect();
+        let placement = format!(
+            " \\\n  --camera {0} --intrinsics {0}.yaml --travels {1} {2}",
+            cam.name,
+            travels.join(","),
+            names.join(" ")
+        );
+        let mut settings = ScanSettings { noise_sigma: self.noise, seed: seed + 77, ..ScanSettings::default() };
+        self.preset.apply(&mut settings);
+        let scanner = Scanner::new(Scene::tabletop(), truth.clone(), self.preset.laser(), settings)?;
+        let mut names = Vec::new();
+        for (i, &hgt) in SYNTH_HEIGHTS.iter().enumerate() {
+            let img = scanner.render_at(ci, &table_from_carm(0.0, hgt, 0.0), true, (ci * 10 + i) as u64);
+            let name = format!("laser/{}_{i}.png", cam.name);
+            Self::write_image(&dir.join(&name), &img)?;
+            names.push(name);
+        }
+        let heights: Vec<String> = SYNTH_HEIGHTS.iter().map(|t| t.to_string()).collect();
+        let laser = format!(" \\\n  --camera {} --heights {} {}", cam.name, heights.join(","), names.join(" "));
+        println!(
+            "{}: {} board views, {} on the tabletop, {} laser lines",
+            cam.name,
+            poses.len(),
+            SYNTH_TRAVELS.len(),
+            SYNTH_HEIGHTS.len()
+        );
+        Ok((intrinsics, placement, laser))
+    }
+}
+
+/// `xsurf calibrate synth DIR`: a calibration set rendered from the study's rig, with the
+/// true rig and the commands that calibrate from it.
+fn synth(args: &[String]) -> anyhow::Result<()> {
+    let set = SynthSet::parse(args)?;
+    let dir = &set.dir;
+    let truth = Rig::study(set.size.0, set.size.1);
     for sub in ["intrinsics", "placement", "laser"] {
         std::fs::create_dir_all(dir.join(sub)).with_context(|| format!("{}", dir.join(sub).display()))?;
     }
@@ -762,78 +876,18 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
         "the true rig the calibration set was rendered with",
     )?;
     // The placement board: centred under the C-arm at travel 0.
+    let (spec, square) = (&set.spec, set.square);
     let origin = Vec3::new(-(spec.cols as f64 - 1.0) * 0.5 * square, (spec.rows as f64 - 1.0) * 0.5 * square, 0.0);
     let board_pose = table_from_board(origin, 0.0);
-    // The script calls the binary that wrote it (xsurf need not be on PATH after a plain
-    // build); XSURF overrides it.
-    let exe = std::env::current_exe().ok().and_then(|p| p.to_str().map(str::to_owned)).map_or_else(
-        || "xsurf".to_string(),
-        // Escaped for its place inside double quotes in the script.
-        |p| p.chars().flat_map(|c| if "\"$`\\".contains(c) { vec!['\\', c] } else { vec![c] }).collect(),
-    );
-    let mut script = format!(
-        "#!/usr/bin/env bash\n# Calibrates the rig from this set (written by `xsurf calibrate synth`); compare rig.yaml with truth_rig.yaml.\n# XSURF=/path/to/xsurf runs another xsurf than the one that wrote it.\nset -euo pipefail\ncd \"$(dirname \"$0\")\"\nXSURF=\"${{XSURF:-{exe}}}\"\nB=\"--board {}x{} --square {square}\"\n",
-        spec.cols, spec.rows
-    );
+    let mut script = set.script_head();
     let mut placement_args =
         format!("\"$XSURF\" calibrate placement $B --board-origin {},{},0 -o rig.yaml", origin.x, origin.y);
     let mut laser_args = String::from("\"$XSURF\" calibrate laser --rig rig.yaml");
-    for (ci, cam) in truth.cameras.iter().enumerate() {
-        let model = cam.model()?;
-        let rays = RayTable::new(&model);
-        let poses = board_views(&model, &spec, count, seed + 1000 * ci as u64);
-        if poses.len() < count {
-            return Err(usage(format!(
-                "--size {w}x{h}: the {}x{} board fits in view only {} of {count} times (a larger image, or fewer --views)",
-                spec.cols,
-                spec.rows,
-                poses.len()
-            )));
-        }
-        for (i, pose) in poses.iter().enumerate() {
-            let img = render_board(&rays, pose, &spec, &look, &exposure, seed ^ ((ci * 100 + i) as u64));
-            png(&dir.join(format!("intrinsics/{}_{i:02}.{ext}", cam.name)), &img)?;
-        }
-        script.push_str(&format!("\"$XSURF\" calibrate intrinsics $B -o {0}.yaml intrinsics/{0}_*.{ext}\n", cam.name));
-        let mut names = Vec::new();
-        for (i, &t) in SYNTH_TRAVELS.iter().enumerate() {
-            let pose = table_from_carm(t, 0.0, 0.0).compose(&cam.carm_from_optical()).inverse().compose(&board_pose);
-            let img = render_board(&rays, &pose, &spec, &table_look, &exposure, seed ^ ((ci * 100 + 50 + i) as u64));
-            let name = format!("placement/{}_{i}.{ext}", cam.name);
-            png(&dir.join(&name), &img)?;
-            names.push(name);
-        }
-        let travels: Vec<String> = SYNTH_TRAVELS.iter().map(|t| t.to_string()).collect();
-        placement_args.push_str(&format!(
-            " \\\n  --camera {0} --intrinsics {0}.yaml --travels {1} {2}",
-            cam.name,
-            travels.join(","),
-            names.join(" ")
-        ));
-        let mut settings = ScanSettings { noise_sigma: noise, seed: seed + 77, ..ScanSettings::default() };
-        preset.apply(&mut settings);
-        let scanner = Scanner::new(Scene::tabletop(), truth.clone(), preset.laser(), settings)?;
-        let mut names = Vec::new();
-        for (i, &hgt) in SYNTH_HEIGHTS.iter().enumerate() {
-            let img = scanner.render_at(ci, &table_from_carm(0.0, hgt, 0.0), true, (ci * 10 + i) as u64);
-            let name = format!("laser/{}_{i}.png", cam.name);
-            png(&dir.join(&name), &img)?;
-            names.push(name);
-        }
-        let heights: Vec<String> = SYNTH_HEIGHTS.iter().map(|t| t.to_string()).collect();
-        laser_args.push_str(&format!(
-            " \\\n  --camera {} --heights {} {}",
-            cam.name,
-            heights.join(","),
-            names.join(" ")
-        ));
-        println!(
-            "{}: {} board views, {} on the tabletop, {} laser lines",
-            cam.name,
-            poses.len(),
-            SYNTH_TRAVELS.len(),
-            SYNTH_HEIGHTS.len()
-        );
+    for ci in 0..truth.cameras.len() {
+        let (intrinsics, placement, laser) = set.camera(&truth, ci, &board_pose)?;
+        script.push_str(&intrinsics);
+        placement_args.push_str(&placement);
+        laser_args.push_str(&laser);
     }
     script.push_str(&placement_args);
     script.push('\n');
