@@ -318,24 +318,41 @@ fn inline_params_file(nodes: &[NodeSpec], dir: &Path) -> anyhow::Result<Option<P
     Ok(Some(path))
 }
 
-fn executable(exec: &str) -> PathBuf {
+/// Where node executable `exec` is: a path as given, the file beside `xsurf`, or one on PATH;
+/// `None` if none is found.
+fn executable(exec: &str) -> Option<PathBuf> {
     if exec.contains('/') {
-        return PathBuf::from(exec);
+        return Some(PathBuf::from(exec));
     }
-    if let Some(dir) = std::env::current_exe().ok().and_then(|p| p.parent().map(Path::to_path_buf)) {
-        let beside = dir.join(exec);
-        if beside.is_file() {
-            return beside;
-        }
-    }
-    PathBuf::from(exec)
+    let beside = std::env::current_exe().ok().and_then(|p| p.parent().map(|d| d.join(exec)));
+    let path = std::env::var_os("PATH").unwrap_or_default();
+    beside.into_iter().chain(std::env::split_paths(&path).map(|d| d.join(exec))).find(|p| p.is_file())
 }
 
-/// The command that starts node `n` as its own process.
+/// The command that starts node `n` as its own process: its executable, or, for a node type
+/// of the registry that has no executable of its own, `xsurf compose` with that one node (so
+/// that a node added as a folder and a registry line runs under `xsurf launch` too).
 fn node_command(n: &NodeSpec, inline: Option<&Path>) -> Command {
-    let mut cmd = Command::new(executable(&n.exec));
-    cmd.args(&n.args).arg("--ros-args");
-    cmd.args(["-r".to_string(), format!("__node:={}", n.name), "-r".into(), format!("__ns:={}", n.namespace)]);
+    let mut cmd = match executable(&n.exec) {
+        Some(path) => {
+            let mut cmd = Command::new(path);
+            cmd.args(&n.args).arg("--ros-args");
+            cmd.args(["-r".to_string(), format!("__node:={}", n.name), "-r".into(), format!("__ns:={}", n.namespace)]);
+            cmd
+        }
+        None if crate::registry::node_type(&n.exec).is_some() => {
+            let exe = std::env::current_exe().unwrap_or_else(|_| PathBuf::from("xsurf"));
+            let mut cmd = Command::new(exe);
+            cmd.arg("compose").arg(format!("{}={}", n.fq_name(), n.exec)).args(&n.args).arg("--ros-args");
+            cmd
+        }
+        // Not found: spawning it names the missing executable.
+        None => {
+            let mut cmd = Command::new(&n.exec);
+            cmd.args(&n.args).arg("--ros-args");
+            cmd
+        }
+    };
     for f in &n.param_files {
         cmd.arg("--params-file").arg(f);
     }
@@ -620,5 +637,37 @@ mod tests {
         bad("launch:\n- node: {exec: merger, respawn: true, respawn_delay: -1}\n", "respawn_delay: \"-1\"");
         bad("launch:\n- node: {exec: merger, param: [{from: /no/such.yaml}]}\n", "/no/such.yaml does not exist");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A node type of the registry with no executable of its own (a unit test's binary has
+    /// none beside it) starts as `xsurf compose` with that one node, under its launch name;
+    /// an executable that is neither found nor a node type is started by its name, whose
+    /// failure names it.
+    #[test]
+    fn a_node_type_without_an_executable_runs_composed_alone() {
+        let spec = NodeSpec {
+            exec: "xray_aligner".into(),
+            name: "aligner".into(),
+            namespace: "/xray".into(),
+            param_files: vec![PathBuf::from("p.yaml")],
+            params: vec![],
+            remaps: vec![("in".into(), "out".into())],
+            args: vec![],
+            ros_args: vec![],
+            respawn: None,
+        };
+        assert!(
+            executable("xray_aligner").is_none(),
+            "precondition: no xray_aligner beside the test binary or on PATH"
+        );
+        let cmd = node_command(&spec, None);
+        let args: Vec<String> = cmd.get_args().map(|a| a.to_string_lossy().into_owned()).collect();
+        assert_eq!(cmd.get_program(), std::env::current_exe().unwrap().as_os_str());
+        assert_eq!(
+            args,
+            ["compose", "/xray/aligner=xray_aligner", "--ros-args", "--params-file", "p.yaml", "-r", "in:=out"]
+        );
+        let other = NodeSpec { exec: "no_such_node".into(), ..spec };
+        assert_eq!(node_command(&other, None).get_program(), "no_such_node");
     }
 }
