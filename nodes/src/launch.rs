@@ -6,8 +6,9 @@
 //! `push-ros-namespace`), with the substitutions `$(var NAME)`, `$(env NAME [DEFAULT])` and
 //! `$(dirname)`. Anything else is an error naming the file and the action.
 //!
-//! Separate mode starts one process per node (the executable beside `xsurf`, else on PATH),
-//! prefixes their output with the node's name, and supervises them: a node with `respawn: true`
+//! Separate mode starts one process per node (the executable beside `xsurf`, else on PATH, else,
+//! for a node type of the registry, `xsurf compose` with that one node), prefixes their output
+//! with the node's name, and supervises them: a node with `respawn: true`
 //! that exits (crashed, killed) is reported and started again after `respawn_delay` seconds, as
 //! `ros2 launch` does, unless it exits 2 (its command line or parameters refused, which a restart
 //! cannot mend); any other node that exits is reported, the others are stopped, and the
