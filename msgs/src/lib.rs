@@ -433,33 +433,6 @@ pub mod sensor_msgs {
     ros_type!(PointField, "sensor_msgs/msg/PointField");
     ros_type!(PointCloud2, "sensor_msgs/msg/PointCloud2");
     ros_type!(JointState, "sensor_msgs/msg/JointState");
-
-    impl Image {
-        /// A checked view of the pixels for the algorithms.
-        pub fn view(&self) -> Result<xsurf_core::image::ImageView<'_>, xsurf_core::image::ImageError> {
-            let enc = xsurf_core::image::Encoding::from_ros(&self.encoding)?;
-            xsurf_core::image::ImageView::new(
-                self.width,
-                self.height,
-                self.step,
-                enc,
-                self.is_bigendian != 0,
-                &self.data,
-            )
-        }
-        /// An `Image` message holding an owned image.
-        pub fn from_image(header: Header, img: xsurf_core::image::Image) -> Image {
-            Image {
-                header,
-                height: img.height,
-                width: img.width,
-                encoding: img.encoding.ros_name().to_string(),
-                is_bigendian: 0,
-                step: img.step(),
-                data: img.data,
-            }
-        }
-    }
 }
 
 /// `shape_msgs`.

@@ -3,15 +3,35 @@
 use xsurf_core::camera::{CameraError, CameraModel};
 use xsurf_core::edge::{LaserLine as CoreLine, Orientation};
 use xsurf_core::geom::{Iso3, Quat, Vec3};
+use xsurf_core::image::{Encoding, Image as CoreImage, ImageError, ImageView};
 use xsurf_core::mesh::{Grid, Mesh};
 use xsurf_core::triangulate::Profile;
 use xsurf_msgs::builtin_interfaces::Time;
 use xsurf_msgs::geometry_msgs::{Point, Quaternion, Transform, TransformStamped, Vector3};
 use xsurf_msgs::pointcloud;
-use xsurf_msgs::sensor_msgs::{CameraInfo, PointCloud2};
+use xsurf_msgs::sensor_msgs::{CameraInfo, Image, PointCloud2};
 use xsurf_msgs::std_msgs::{ColorRGBA, Header};
 use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::LaserLine;
+
+/// A checked view of an `Image` message's pixels for the algorithms.
+pub fn image_view(img: &Image) -> Result<ImageView<'_>, ImageError> {
+    let enc = Encoding::from_ros(&img.encoding)?;
+    ImageView::new(img.width, img.height, img.step, enc, img.is_bigendian != 0, &img.data)
+}
+
+/// An `Image` message holding an owned image.
+pub fn image_msg(header: Header, img: CoreImage) -> Image {
+    Image {
+        header,
+        height: img.height,
+        width: img.width,
+        encoding: img.encoding.ros_name().to_string(),
+        is_bigendian: 0,
+        step: img.step(),
+        data: img.data,
+    }
+}
 
 /// A header.
 pub fn header(stamp_ns: i64, frame_id: &str) -> Header {

@@ -257,7 +257,12 @@ fn write_bag_into(
                     )?;
                     let frame = scanner.render(ci, f);
                     match compressed {
-                        None => put(&mut w, &format!("/{}/image_raw", c.name), t, &Image::from_image(header, frame))?,
+                        None => put(
+                            &mut w,
+                            &format!("/{}/image_raw", c.name),
+                            t,
+                            &crate::convert::image_msg(header, frame),
+                        )?,
                         Some((codec, quality)) => {
                             let (format, data) = encode(&frame, codec, quality).map_err(anyhow::Error::msg)?;
                             let m = CompressedImage { header, format, data };

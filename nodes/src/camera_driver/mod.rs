@@ -214,7 +214,7 @@ impl CameraDriverNode {
         let stamp = f.stamp_ns;
         let header = convert::header(stamp, &format!("{}_optical_frame", self.camera));
         let image = match self.cfg.compressed {
-            None => Msg::Image(Arc::new(Image::from_image(header.clone(), f.image))),
+            None => Msg::Image(Arc::new(convert::image_msg(header.clone(), f.image))),
             Some((codec, quality)) => match xsurf_formats::compressed::encode(&f.image, codec, quality) {
                 Ok((format, data)) => {
                     Msg::CompressedImage(Arc::new(CompressedImage { header: header.clone(), format, data }))

@@ -67,7 +67,7 @@ impl EdgeDetectorNode {
         let decoded;
         let (view, header) = match msg {
             Msg::Image(img) => {
-                let view = img.view().map_err(|e| {
+                let view = convert::image_view(img).map_err(|e| {
                     self.bad_images += 1;
                     NodeError::new(format!("image at {}: {e}", at(&img.header)))
                 })?;
