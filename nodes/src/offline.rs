@@ -330,11 +330,16 @@ fn build_graph(topics: &BagTopics, ros: &RosArgs, opts: &Options) -> anyhow::Res
         let transport =
             image_transport(cam, &topics.transports[cam], &ros.param_overrides(&fq_name(&ns, "edge_detector"))?)?;
         for node in components::NODES.iter().filter(|t| t.role == components::Role::PerCamera) {
-            let extra = match node.name {
-                "edge_detector" => vec![("image_transport", ParamValue::String(transport.into()))],
-                "mesher" => vec![("output_dir", out_dir.clone())],
-                _ => vec![],
-            };
+            // What the bag and the command decide, given to each node that declares it: the
+            // images' transport to the image readers, the output folder to the file writers.
+            let declared = (node.declarations)();
+            let extra: Vec<(&str, ParamValue)> = [
+                ("image_transport", ParamValue::String(transport.into())),
+                ("output_dir", out_dir.clone()),
+            ]
+            .into_iter()
+            .filter(|(name, _)| declared.iter().any(|d| d.name == *name))
+            .collect();
             router.add(build(node.name, &ns, &extra)?, node.name, &ns, &ros.remaps);
         }
     }
