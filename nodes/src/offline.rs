@@ -333,13 +333,11 @@ fn build_graph(topics: &BagTopics, ros: &RosArgs, opts: &Options) -> anyhow::Res
             // What the bag and the command decide, given to each node that declares it: the
             // images' transport to the image readers, the output folder to the file writers.
             let declared = (node.declarations)();
-            let extra: Vec<(&str, ParamValue)> = [
-                ("image_transport", ParamValue::String(transport.into())),
-                ("output_dir", out_dir.clone()),
-            ]
-            .into_iter()
-            .filter(|(name, _)| declared.iter().any(|d| d.name == *name))
-            .collect();
+            let extra: Vec<(&str, ParamValue)> =
+                [("image_transport", ParamValue::String(transport.into())), ("output_dir", out_dir.clone())]
+                    .into_iter()
+                    .filter(|(name, _)| declared.iter().any(|d| d.name == *name))
+                    .collect();
             router.add(build(node.name, &ns, &extra)?, node.name, &ns, &ros.remaps);
         }
     }
