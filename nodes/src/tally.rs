@@ -152,6 +152,7 @@ impl ScanTally {
             camera,
             frames_refused: refused.values().map(|r| r.frames).sum(),
             frames_skipped: self.skipped.before(stamp) as u64,
+            node: node.name().to_string(),
             refused,
             scan_id: id,
             ..StageReport::default()
@@ -161,7 +162,6 @@ impl ScanTally {
             Stage::EdgeDetector => report.frames_taken = counted,
             Stage::Triangulator => report.frames_placed = counted,
         }
-        report.node = node.name().to_string();
         // What came after the END stamp may be the next scan's (its START not yet seen).
         self.counted.start(stamp);
         self.skipped.start(stamp);

@@ -136,8 +136,6 @@ pub struct MergerNode {
     /// The reports on `/scan/report`, by scan and camera: the current scan's, and any that
     /// arrived before the merger saw their scan's START or END (they take other paths).
     reports: BTreeMap<(u32, String), CameraReports>,
-    /// The last scan whose account was written, with the cameras merged.
-    reported: Option<(u32, Vec<String>)>,
     scan_id: u32,
     pending_deadline: Option<i64>,
     merges: u64,
@@ -175,7 +173,6 @@ impl MergerNode {
             camera_sizes: BTreeMap::new(),
             scan_start_ns: None,
             reports: BTreeMap::new(),
-            reported: None,
             scan_id: 0,
             pending_deadline: None,
             merges: 0,
@@ -231,7 +228,6 @@ impl MergerNode {
             self.clouds.iter().map(|(&i, (_, g))| (self.cfg.cameras[i].clone(), g.clone())).collect();
         let (names, mut gs): (Vec<String>, Vec<Grid>) = grids.into_iter().unzip();
         let scan_report = self.scan_report(self.scan_id, &names);
-        self.reported = Some((self.scan_id, names.clone()));
         let (refined, refinement) = self.refine(&names, &mut gs);
         if !refined.is_empty() {
             let placements = TFMessage {
@@ -352,6 +348,12 @@ impl MergerNode {
         self.problems.push(why);
     }
 
+    /// The last scan merged and its cameras (of its meshes, those of ours: not the seams').
+    fn last_merged(&self) -> Option<(u32, Vec<String>)> {
+        let (id, _, meshes) = self.last_merge.as_ref()?;
+        Some((*id, meshes.iter().map(|(n, _)| n).filter(|n| self.cfg.cameras.contains(n)).cloned().collect()))
+    }
+
     /// Keeps a report of a camera of ours (the others are no merge's).
     fn keep_report(&mut self, r: Report) {
         if !self.cfg.cameras.iter().any(|c| c == r.camera()) {
@@ -442,7 +444,6 @@ impl MergerNode {
         }
     }
 
-    /// Writes `value` as `dir/name` (atomically, `dir` made if need be); a failure is counted.
     /// Writes `scan_<id>/scan_report.json`.
     fn write_report(&mut self, scan_id: u32, report: &ScanReport) {
         let Some(out) = self.cfg.output_dir.clone() else { return };
@@ -451,6 +452,7 @@ impl MergerNode {
         self.write_json(&out.join(format!("scan_{scan_id}")), "scan_report.json", &value);
     }
 
+    /// Writes `value` as `dir/name` (atomically, `dir` made if need be); a failure is counted.
     fn write_json(&mut self, dir: &std::path::Path, name: &str, value: &serde_json::Value) {
         let path = dir.join(name);
         let text = serde_json::to_string_pretty(value).unwrap_or_default();
@@ -634,7 +636,7 @@ impl Component for MergerNode {
                 let scan = r.scan_id();
                 self.keep_report(r);
                 // A report of a scan already merged: its account is written again, whole.
-                if let Some((id, names)) = self.reported.clone().filter(|(id, _)| *id == scan) {
+                if let Some((id, names)) = self.last_merged().filter(|(id, _)| *id == scan) {
                     log::info!("merger: scan {id}: a report arrived after the merge; scan_report.json written again");
                     let report = self.scan_report(id, &names);
                     self.write_report(id, &report);
@@ -798,10 +800,6 @@ mod tests {
         assert!(m.handle(n + 5, &Msg::CameraInfo(Arc::new(bad)), &mut out).is_err());
     }
 
-    /// Two cameras that see the same flat patch 0.3 mm apart (inside fuse_distance_m): after
-    /// END and merge_delay_s, one layer is published on /surface/cloud and /surface/mesh,
-    /// about one camera's points, not both; a camera 5 mm off (beyond it) stays a layer of its
-    /// own.
     /// A camera's grid of `frames` frames of `samples` points on a flat patch at height
     /// 0.02 + `dz`, stamped at `sec`.
     fn flat_cloud(samples: usize, frames: usize, dz: f32, sec: i32) -> Msg {
@@ -872,6 +870,10 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// Two cameras that see the same flat patch 0.3 mm apart (inside fuse_distance_m): after
+    /// END and merge_delay_s, one layer is published on /surface/cloud and /surface/mesh,
+    /// about one camera's points, not both; a camera 5 mm off (beyond it) stays a layer of its
+    /// own.
     #[test]
     fn overlapping_cameras_merge_into_one_layer_after_the_delay() {
         use xsurf_runtime::harness::Harness;
