@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use xsurf_core::synth::SplitMix;
-use xsurf_runtime::component::{Component, Msg, Outbox};
+use xsurf_runtime::component::{AnyComponent, Msg, Outbox};
 use xsurf_runtime::params::Params;
 
 // ---------------------------------------------------------------------------------------------
@@ -151,7 +151,7 @@ const MCAP_TOKENS: &[&[u8]] = &[b"\x89MCAP0\r\n", b"\x06", b"\x07", b"\x05", b"z
 
 /// The graph's seven components, built from default parameters, that CDR inputs are handed to.
 struct Nodes {
-    nodes: Vec<Box<dyn Component>>,
+    nodes: Vec<Box<dyn AnyComponent>>,
     out: Outbox,
 }
 

@@ -9,7 +9,7 @@ use crate::registry as components;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Duration;
-use xsurf_runtime::component::Component;
+use xsurf_runtime::component::AnyComponent;
 use xsurf_runtime::dds::{self, DdsEnv, HostConfig, QosTable};
 use xsurf_runtime::params::Params;
 use xsurf_runtime::rosargs::{fq_name, RosArgs};
@@ -21,7 +21,7 @@ pub fn node_config(
     name: &str,
     namespace: &str,
     ros: &RosArgs,
-) -> Result<(HostConfig, Box<dyn Component>), String> {
+) -> Result<(HostConfig, Box<dyn AnyComponent>), String> {
     let fq = fq_name(namespace, name);
     let (decls, params) = components::resolve(node, &fq, ros, &[])?;
     QosTable::from_params(&params).map_err(|e| format!("{fq}: {e}"))?;
@@ -75,7 +75,7 @@ fn check_identity(name: &str, ns: &str) -> Result<(), String> {
     Ok(())
 }
 
-fn host(who: &str, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> ExitCode {
+fn host(who: &str, nodes: Vec<(HostConfig, Box<dyn AnyComponent>)>) -> ExitCode {
     let env = match DdsEnv::from_env(|k| std::env::var(k).ok()) {
         Ok(e) => e,
         Err(e) => {

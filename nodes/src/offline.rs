@@ -45,6 +45,9 @@ pub struct NodeReport {
     pub messages: u64,
     /// Messages refused (bad input).
     pub errors: u64,
+    /// The same by kind (`malformed`, `contradicts`, `not_ready`, `wrong_type`, `failed`).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub errors_by_kind: BTreeMap<&'static str, u64>,
     /// Time in the node, seconds.
     pub seconds: f64,
     /// The node's own counters.
@@ -124,29 +127,37 @@ pub fn proc_status_bytes(field: &str) -> Option<u64> {
 /// Per-camera topics a reconstruction needs besides the images.
 const USED_TYPES: &[(&str, &str)] = &[("camera_info", "sensor_msgs/msg/CameraInfo")];
 
-/// The transport a camera's edge detector reads from a bag: the one the bag holds, or, where it
-/// holds both, the one the `image_transport` parameter chooses (an error without it: the frames
-/// would be read twice).
-fn image_transport(
-    cam: &str,
-    in_bag: &[&str],
-    overrides: &BTreeMap<String, ParamValue>,
-) -> anyhow::Result<&'static str> {
-    let chosen = match overrides.get("image_transport") {
-        None => None,
-        Some(ParamValue::String(s)) if s == "raw" => Some("raw"),
-        Some(ParamValue::String(s)) if s == "compressed" => Some("compressed"),
-        Some(v) => bail!("parameter /{cam}/edge_detector image_transport: {v:?} is not raw or compressed"),
-    };
+/// The transport a camera's image readers (the per-camera nodes that declare `image_transport`)
+/// take from a bag: the one the bag holds, or, where it holds both, the one their
+/// `image_transport` parameter chooses (an error without it: the frames would be read twice).
+fn image_transport(cam: &str, in_bag: &[&str], ros: &RosArgs) -> anyhow::Result<&'static str> {
+    let ns = format!("/{cam}");
+    let readers: Vec<String> = components::NODES
+        .iter()
+        .filter(|t| {
+            t.role == components::Role::PerCamera && (t.declarations)().iter().any(|d| d.name == "image_transport")
+        })
+        .map(|t| fq_name(&ns, t.name))
+        .collect();
+    let mut chosen = None;
+    for fq in &readers {
+        chosen = match ros.param_overrides(fq)?.get("image_transport") {
+            None => chosen,
+            Some(ParamValue::String(s)) if s == "raw" => Some("raw"),
+            Some(ParamValue::String(s)) if s == "compressed" => Some("compressed"),
+            Some(v) => bail!("parameter {fq} image_transport: {v:?} is not raw or compressed"),
+        };
+    }
     let topic = |t: &str| if t == "raw" { format!("/{cam}/image_raw") } else { format!("/{cam}/image_raw/compressed") };
     match (chosen, in_bag) {
         (Some(c), _) if in_bag.contains(&c) => Ok(c),
         (Some(c), _) => bail!("camera {cam}: image_transport {c} chosen, but the bag has no {}", topic(c)),
         (None, [only]) => Ok(if *only == "raw" { "raw" } else { "compressed" }),
         (None, _) => bail!(
-            "camera {cam}: the bag holds both {} and {}; choose one with the parameter image_transport (raw or compressed) of /{cam}/edge_detector in --params-file",
+            "camera {cam}: the bag holds both {} and {}; choose one with the parameter image_transport (raw or compressed) of {} in --params-file",
             topic("raw"),
-            topic("compressed")
+            topic("compressed"),
+            readers.join(", ")
         ),
     }
 }
@@ -320,15 +331,14 @@ fn build_graph(topics: &BagTopics, ros: &RosArgs, opts: &Options) -> anyhow::Res
     let build = |node: &str,
                  ns: &str,
                  extra: &[(&str, ParamValue)]|
-     -> anyhow::Result<Box<dyn xsurf_runtime::component::Component>> {
+     -> anyhow::Result<Box<dyn xsurf_runtime::component::AnyComponent>> {
         let fq = fq_name(ns, node);
         let (_, params) = components::resolve(node, &fq, ros, extra).map_err(anyhow::Error::msg)?;
         components::build(node, &params).with_context(|| format!("node {fq}"))
     };
     for cam in &topics.cameras {
         let ns = format!("/{cam}");
-        let transport =
-            image_transport(cam, &topics.transports[cam], &ros.param_overrides(&fq_name(&ns, "edge_detector"))?)?;
+        let transport = image_transport(cam, &topics.transports[cam], ros)?;
         for node in components::NODES.iter().filter(|t| t.role == components::Role::PerCamera) {
             // What the bag and the command decide, given to each node that declares it: the
             // images' transport to the image readers, the output folder to the file writers.
@@ -573,39 +583,13 @@ impl Report {
             let counters: BTreeMap<String, u64> =
                 n.component.counters().into_iter().map(|(k, v)| (k.to_string(), v)).collect();
             let cam = n.namespace.trim_start_matches('/').to_string();
-            let get = |k: &str| counters.get(k).copied().unwrap_or(0);
-            match n.name.as_str() {
-                "edge_detector" => {
-                    self.frames_with_line.insert(cam.clone(), get("frames_with_line"));
-                }
-                "triangulator" => {
-                    self.points.insert(cam.clone(), get("points"));
-                }
-                "mesher" => {
-                    self.triangles.insert(cam.clone(), get("triangles"));
-                    self.surface_points.insert(cam.clone(), get("mesh_points"));
-                    self.dropped_frames.insert(cam.clone(), get("dropped_frames"));
-                }
-                "merger" => {
-                    self.merged_points = get("points");
-                    self.merged_triangles = get("triangles");
-                }
-                "xray_aligner" => {
-                    self.xray = Some(if get("placed") > 0 && implicit_scan {
-                        "placed (exposure: the bag's first to last frame, as it has no /scan/events)".to_string()
-                    } else if get("placed") > 0 {
-                        "placed".to_string()
-                    } else {
-                        format!("not placed: {}", n.last_error.clone().unwrap_or_else(|| "see the log".into()))
-                    });
-                }
-                _ => {}
-            }
+            self.take_figures(n.component.as_any(), cam, implicit_scan, n.last_error.as_deref());
             *self.timings_s.entry(n.name.clone()).or_default() += n.busy_ns as f64 * 1e-9;
             self.nodes.push(NodeReport {
                 node: n.fq_name(),
                 messages: n.handled,
                 errors: n.errors,
+                errors_by_kind: n.errors_by_kind.clone(),
                 seconds: n.busy_ns as f64 * 1e-9,
                 counters,
                 last_error: n.last_error.clone(),
@@ -614,6 +598,30 @@ impl Report {
         }
         if let Some(e) = xray_error {
             self.xray = Some(format!("not placed: {e}"));
+        }
+    }
+
+    /// The figures of one node, read from its own type.
+    fn take_figures(&mut self, node: &dyn std::any::Any, cam: String, implicit_scan: bool, last_error: Option<&str>) {
+        if let Some(e) = node.downcast_ref::<crate::edge_detector::EdgeDetectorNode>() {
+            self.frames_with_line.insert(cam, e.frames_with_line());
+        } else if let Some(t) = node.downcast_ref::<crate::triangulator::TriangulatorNode>() {
+            self.points.insert(cam, t.points());
+        } else if let Some(m) = node.downcast_ref::<crate::mesher::MesherNode>() {
+            self.triangles.insert(cam.clone(), m.triangles());
+            self.surface_points.insert(cam.clone(), m.mesh_points());
+            self.dropped_frames.insert(cam, m.dropped_frames());
+        } else if let Some(m) = node.downcast_ref::<crate::merger::MergerNode>() {
+            self.merged_points = m.points();
+            self.merged_triangles = m.triangles();
+        } else if let Some(x) = node.downcast_ref::<crate::xray_aligner::XrayAlignerNode>() {
+            self.xray = Some(if x.placed() > 0 && implicit_scan {
+                "placed (exposure: the bag's first to last frame, as it has no /scan/events)".to_string()
+            } else if x.placed() > 0 {
+                "placed".to_string()
+            } else {
+                format!("not placed: {}", last_error.unwrap_or("see the log"))
+            });
         }
     }
 

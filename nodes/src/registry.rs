@@ -5,7 +5,7 @@
 //! parameters and its constructor here by name; the docs (`--help`, nodes/README.md) follow
 //! from the same entries.
 
-use xsurf_runtime::component::Component;
+use xsurf_runtime::component::AnyComponent;
 use xsurf_runtime::params::{NodeParams, ParamDecl, ParamError, ParamValue, Params};
 use xsurf_runtime::rosargs::RosArgs;
 
@@ -17,7 +17,7 @@ pub struct NodeType {
     /// Its parameter declarations (its `params.rs`).
     pub declarations: fn() -> Vec<ParamDecl>,
     /// Its component from resolved parameters.
-    pub build: fn(&Params) -> Result<Box<dyn Component>, ParamError>,
+    pub build: fn(&Params) -> Result<Box<dyn AnyComponent>, ParamError>,
     /// Where it sits in the graph.
     pub role: Role,
     /// How often a live host ticks it when it asks for nothing sooner, ms (sources keep time on
@@ -31,7 +31,7 @@ impl NodeType {
         name: &'static str,
         role: Role,
         tick_period_ms: u64,
-        build: fn(&Params) -> Result<Box<dyn Component>, ParamError>,
+        build: fn(&Params) -> Result<Box<dyn AnyComponent>, ParamError>,
     ) -> NodeType {
         NodeType { name, declarations: P::declarations, build, role, tick_period_ms }
     }
@@ -96,7 +96,7 @@ pub fn declarations(node: &str) -> Option<Vec<ParamDecl>> {
 }
 
 /// Builds a component by node type name from its resolved parameters.
-pub fn build(node: &str, params: &Params) -> Result<Box<dyn Component>, ParamError> {
+pub fn build(node: &str, params: &Params) -> Result<Box<dyn AnyComponent>, ParamError> {
     match node_type(node) {
         Some(t) => (t.build)(params),
         None => Err(ParamError::Invalid { name: "node".into(), reason: format!("no component named {node}") }),

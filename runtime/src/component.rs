@@ -148,64 +148,156 @@ impl Port {
     }
 }
 
-/// Messages a component publishes while handling one input: `(output index, message)`; and
-/// earlier messages it refuses only now (a line kept until its pose arrived, say).
-#[derive(Debug, Default)]
-pub struct Outbox {
+/// The name of one of a component's inputs or outputs: an enum with a variant per port (or per
+/// port of a camera, `Cloud(k)`), never a bare index.
+pub trait PortId: Copy + Eq + std::fmt::Debug + Send + 'static {}
+impl<T: Copy + Eq + std::fmt::Debug + Send + 'static> PortId for T {}
+
+/// Messages a component publishes while handling one input: `(output, message)`; and earlier
+/// messages it refuses only now (a line kept until its pose arrived, say). A component fills an
+/// `Outbox<Self::Input, Self::Output>`; a host reads the `Outbox` of port positions.
+#[derive(Debug)]
+pub struct Outbox<I = usize, O = usize> {
     /// Queued messages.
-    pub items: Vec<(usize, Msg)>,
-    /// Earlier messages refused now: `(input index, why)`. The host counts and logs each under
-    /// its own input's topic, not the topic of the message being handled.
-    pub refused: Vec<(usize, NodeError)>,
+    pub items: Vec<(O, Msg)>,
+    /// Earlier messages refused now: `(input, why)`. The host counts and logs each under its own
+    /// input's topic, not the topic of the message being handled.
+    pub refused: Vec<(I, NodeError)>,
 }
 
-impl Outbox {
+impl<I, O> Default for Outbox<I, O> {
+    fn default() -> Self {
+        Outbox { items: Vec::new(), refused: Vec::new() }
+    }
+}
+
+impl<I, O> Outbox<I, O> {
     /// Publishes `msg` on output `port`.
-    pub fn publish(&mut self, port: usize, msg: Msg) {
+    pub fn publish(&mut self, port: O, msg: Msg) {
         self.items.push((port, msg));
     }
     /// Refuses an earlier message of input `input`, now.
-    pub fn refuse(&mut self, input: usize, e: NodeError) {
+    pub fn refuse(&mut self, input: I, e: NodeError) {
         self.refused.push((input, e));
     }
 }
 
-/// A failure handling one message: logged and counted by the host; the node goes on.
+/// Why a component refused a message (or failed on it): logged and counted by the host, by
+/// kind; the node goes on. The text says what was wrong in the message's own terms (its topic or
+/// stamp, the field, the value).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{0}")]
-pub struct NodeError(pub String);
+pub enum NodeError {
+    /// The message cannot be read: bad encoding, a field out of range or not finite, an unknown
+    /// event.
+    #[error("{0}")]
+    Malformed(String),
+    /// Well formed, but it contradicts what the node knows: the camera's geometry, the scan's
+    /// grid, the frame it should be in.
+    #[error("{0}")]
+    Contradicts(String),
+    /// The node cannot use it yet (no camera_info so far, no pose for its stamp).
+    #[error("{0}")]
+    NotReady(String),
+    /// A message of another type than its port carries.
+    #[error("unexpected {got} on {port}{}", carries(*.expected))]
+    WrongType {
+        /// The port, as the component names it (or its position).
+        port: String,
+        /// The type the port carries, where the one refusing knows it.
+        expected: Option<&'static str>,
+        /// The type that came.
+        got: &'static str,
+    },
+    /// The message was good; the work on it failed (a file that could not be written).
+    #[error("{0}")]
+    Failed(String),
+}
+
+/// `, which carries <type>` when the type is known.
+fn carries(expected: Option<&'static str>) -> String {
+    expected.map(|t| format!(", which carries {t}")).unwrap_or_default()
+}
 
 impl NodeError {
-    /// An error from anything displayable.
-    pub fn new(e: impl std::fmt::Display) -> Self {
-        NodeError(e.to_string())
+    /// [`NodeError::Malformed`] from anything displayable.
+    pub fn malformed(e: impl std::fmt::Display) -> Self {
+        NodeError::Malformed(e.to_string())
+    }
+    /// [`NodeError::Contradicts`] from anything displayable.
+    pub fn contradicts(e: impl std::fmt::Display) -> Self {
+        NodeError::Contradicts(e.to_string())
+    }
+    /// [`NodeError::NotReady`] from anything displayable.
+    pub fn not_ready(e: impl std::fmt::Display) -> Self {
+        NodeError::NotReady(e.to_string())
+    }
+    /// [`NodeError::Failed`] from anything displayable.
+    pub fn failed(e: impl std::fmt::Display) -> Self {
+        NodeError::Failed(e.to_string())
+    }
+    /// [`NodeError::WrongType`]: `msg` came on `port`, which does not carry its type.
+    pub fn unexpected(port: impl std::fmt::Debug, msg: &Msg) -> Self {
+        NodeError::WrongType { port: format!("{port:?}"), expected: None, got: msg.type_name() }
+    }
+    /// The same error of the same kind, its text led by `context` (`line at 12.5: ...`).
+    pub fn context(self, context: impl std::fmt::Display) -> Self {
+        match self {
+            NodeError::Malformed(t) => NodeError::Malformed(format!("{context}: {t}")),
+            NodeError::Contradicts(t) => NodeError::Contradicts(format!("{context}: {t}")),
+            NodeError::NotReady(t) => NodeError::NotReady(format!("{context}: {t}")),
+            NodeError::Failed(t) => NodeError::Failed(format!("{context}: {t}")),
+            NodeError::WrongType { port, expected, got } => {
+                NodeError::WrongType { port: format!("{context}: {port}"), expected, got }
+            }
+        }
+    }
+    /// The kind, as reports count it: `malformed`, `contradicts`, `not_ready`, `wrong_type`,
+    /// `failed`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            NodeError::Malformed(_) => "malformed",
+            NodeError::Contradicts(_) => "contradicts",
+            NodeError::NotReady(_) => "not_ready",
+            NodeError::WrongType { .. } => "wrong_type",
+            NodeError::Failed(_) => "failed",
+        }
     }
 }
 
-/// A node's logic, independent of the transport.
-pub trait Component: Send {
+/// A node's logic, independent of the transport. Its ports are named by its own `Input` and
+/// `Output` types; [`boxed`] makes it an [`AnyComponent`], which hosts number by position.
+pub trait Component: Send + 'static {
+    /// The names of its inputs.
+    type Input: PortId;
+    /// The names of its outputs.
+    type Output: PortId;
     /// The node's default name (`edge_detector`, ...).
     fn node_name(&self) -> &'static str;
-    /// Inputs, in the order `handle` numbers them.
-    fn inputs(&self) -> Vec<Port>;
-    /// Outputs, in the order `Outbox::publish` numbers them.
-    fn outputs(&self) -> Vec<Port>;
+    /// Its inputs, each named, in the order a host subscribes to them.
+    fn inputs(&self) -> Vec<(Self::Input, Port)>;
+    /// Its outputs, each named, in the order a host advertises them.
+    fn outputs(&self) -> Vec<(Self::Output, Port)>;
     /// Tells the component where it was placed (node name and namespace), before any message.
     fn set_identity(&mut self, _name: &str, _namespace: &str) {}
     /// Applies a new set of parameter values; a set that fails validation is refused and the
     /// old configuration stays.
     fn reconfigure(&mut self, params: &Params) -> Result<(), ParamError>;
-    /// Handles one message from input `input`.
-    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError>;
+    /// Handles one message from input `input` (of the type its port declares: the host checks).
+    fn handle(
+        &mut self,
+        input: Self::Input,
+        msg: &Msg,
+        out: &mut Outbox<Self::Input, Self::Output>,
+    ) -> Result<(), NodeError>;
     /// Called periodically with the node's clock (ns since the epoch).
-    fn tick(&mut self, _now_ns: i64, _out: &mut Outbox) {}
+    fn tick(&mut self, _now_ns: i64, _out: &mut Outbox<Self::Input, Self::Output>) {}
     /// When the node next needs a tick (ns on its clock), if it keeps a schedule of its own (a
     /// camera's frame times): the host ticks it then rather than at its next periodic tick.
     fn next_tick_ns(&self) -> Option<i64> {
         None
     }
     /// No more input is coming (end of a bag, or shutdown): flush what is pending.
-    fn finish(&mut self, _out: &mut Outbox) {}
+    fn finish(&mut self, _out: &mut Outbox<Self::Input, Self::Output>) {}
     /// True for a node whose work is bulk (meshing, merging, overlays) rather than on the path
     /// from a frame to its profile: the live host runs it, and the publishers of its outputs,
     /// at a lower CPU priority, so that on a loaded machine the cameras' chain goes first.
@@ -220,5 +312,215 @@ pub trait Component: Send {
     /// recent last, for reports.
     fn problems(&self) -> Vec<String> {
         Vec::new()
+    }
+}
+
+/// A component as hosts see it: its ports numbered by position, `handle(0, ..)` being its first
+/// input. Made by [`boxed`]; the concrete component stays reachable through [`AnyComponent::as_any`]
+/// (the offline report reads each node's figures from its own type).
+pub trait AnyComponent: Send {
+    /// See [`Component::node_name`].
+    fn node_name(&self) -> &'static str;
+    /// Its input ports, by position.
+    fn inputs(&self) -> Vec<Port>;
+    /// Its output ports, by position.
+    fn outputs(&self) -> Vec<Port>;
+    /// See [`Component::set_identity`].
+    fn set_identity(&mut self, name: &str, namespace: &str);
+    /// See [`Component::reconfigure`].
+    fn reconfigure(&mut self, params: &Params) -> Result<(), ParamError>;
+    /// Handles one message from the input at position `input`; a message whose type is not the
+    /// port's is refused ([`NodeError::WrongType`]) before it reaches the component.
+    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError>;
+    /// See [`Component::tick`].
+    fn tick(&mut self, now_ns: i64, out: &mut Outbox);
+    /// See [`Component::next_tick_ns`].
+    fn next_tick_ns(&self) -> Option<i64>;
+    /// See [`Component::finish`].
+    fn finish(&mut self, out: &mut Outbox);
+    /// See [`Component::bulk`].
+    fn bulk(&self) -> bool;
+    /// See [`Component::counters`].
+    fn counters(&self) -> Vec<(&'static str, u64)>;
+    /// See [`Component::problems`].
+    fn problems(&self) -> Vec<String>;
+    /// The component itself, to downcast to its type.
+    fn as_any(&self) -> &dyn std::any::Any;
+}
+
+/// `component` with its ports numbered, for a host.
+pub fn boxed<C: Component>(component: C) -> Box<dyn AnyComponent> {
+    let mut p = Numbered { inner: component, inputs: Vec::new(), outputs: Vec::new() };
+    p.number();
+    Box::new(p)
+}
+
+/// A component with its port names listed by position.
+struct Numbered<C: Component> {
+    inner: C,
+    /// Input names and their types, by position.
+    inputs: Vec<(C::Input, &'static str)>,
+    /// Output names, by position.
+    outputs: Vec<C::Output>,
+}
+
+impl<C: Component> Numbered<C> {
+    /// Lists the ports (again: a component's ports are fixed once it is built).
+    fn number(&mut self) {
+        self.inputs = self.inner.inputs().into_iter().map(|(id, p)| (id, p.type_name)).collect();
+        self.outputs = self.inner.outputs().into_iter().map(|(id, _)| id).collect();
+    }
+    /// The component's outbox as positions. An output the component never listed (a bug in the
+    /// component) is logged and dropped; so is a refusal of an input it never listed.
+    fn numbered(&self, typed: Outbox<C::Input, C::Output>, out: &mut Outbox) {
+        for (id, msg) in typed.items {
+            match self.outputs.iter().position(|o| *o == id) {
+                Some(k) => out.publish(k, msg),
+                None => log::error!("{}: published on undeclared output {id:?}", self.inner.node_name()),
+            }
+        }
+        for (id, e) in typed.refused {
+            match self.inputs.iter().position(|(i, _)| *i == id) {
+                Some(k) => out.refuse(k, e),
+                None => log::error!("{}: refused on undeclared input {id:?}: {e}", self.inner.node_name()),
+            }
+        }
+    }
+}
+
+impl<C: Component> AnyComponent for Numbered<C> {
+    fn node_name(&self) -> &'static str {
+        self.inner.node_name()
+    }
+    fn inputs(&self) -> Vec<Port> {
+        self.inner.inputs().into_iter().map(|(_, p)| p).collect()
+    }
+    fn outputs(&self) -> Vec<Port> {
+        self.inner.outputs().into_iter().map(|(_, p)| p).collect()
+    }
+    fn set_identity(&mut self, name: &str, namespace: &str) {
+        self.inner.set_identity(name, namespace);
+        self.number();
+    }
+    fn reconfigure(&mut self, params: &Params) -> Result<(), ParamError> {
+        self.inner.reconfigure(params)
+    }
+    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+        let Some(&(id, expected)) = self.inputs.get(input) else {
+            return Err(NodeError::WrongType { port: format!("input {input}"), expected: None, got: msg.type_name() });
+        };
+        if msg.type_name() != expected {
+            return Err(NodeError::WrongType {
+                port: format!("{id:?}"),
+                expected: Some(expected),
+                got: msg.type_name(),
+            });
+        }
+        let mut typed = Outbox::default();
+        let r = self.inner.handle(id, msg, &mut typed);
+        self.numbered(typed, out);
+        r
+    }
+    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+        let mut typed = Outbox::default();
+        self.inner.tick(now_ns, &mut typed);
+        self.numbered(typed, out);
+    }
+    fn next_tick_ns(&self) -> Option<i64> {
+        self.inner.next_tick_ns()
+    }
+    fn finish(&mut self, out: &mut Outbox) {
+        let mut typed = Outbox::default();
+        self.inner.finish(&mut typed);
+        self.numbered(typed, out);
+    }
+    fn bulk(&self) -> bool {
+        self.inner.bulk()
+    }
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        self.inner.counters()
+    }
+    fn problems(&self) -> Vec<String> {
+        self.inner.problems()
+    }
+    fn as_any(&self) -> &dyn std::any::Any {
+        &self.inner
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    enum In {
+        Lines,
+        Events,
+    }
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    enum Out {
+        Never,
+        Profiles,
+    }
+
+    /// Lists its ports in another order than its enums declare them, and an output it never
+    /// lists; refuses the line before each event.
+    struct Node;
+
+    impl Component for Node {
+        type Input = In;
+        type Output = Out;
+        fn node_name(&self) -> &'static str {
+            "node"
+        }
+        fn inputs(&self) -> Vec<(In, Port)> {
+            vec![
+                (In::Events, Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable)),
+                (In::Lines, Port::new("laser_line", LaserLine::TYPE_NAME, QosClass::Reliable)),
+            ]
+        }
+        fn outputs(&self) -> Vec<(Out, Port)> {
+            vec![(Out::Profiles, Port::new("profile", PointCloud2::TYPE_NAME, QosClass::Reliable))]
+        }
+        fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
+            Ok(())
+        }
+        fn handle(&mut self, input: In, msg: &Msg, out: &mut Outbox<In, Out>) -> Result<(), NodeError> {
+            match (input, msg) {
+                (In::Lines, Msg::LaserLine(_)) => {
+                    out.publish(Out::Profiles, Msg::Cloud(Arc::default()));
+                    out.publish(Out::Never, Msg::Cloud(Arc::default()));
+                    Ok(())
+                }
+                (In::Events, Msg::ScanEvent(_)) => {
+                    out.refuse(In::Lines, NodeError::not_ready("no pose"));
+                    Err(NodeError::malformed("unknown scan event 9"))
+                }
+                (i, m) => Err(NodeError::unexpected(i, m)),
+            }
+        }
+    }
+
+    /// A host's positions reach the component as its own port names, and what it publishes or
+    /// refuses goes back as positions; a message of another type than its port's never reaches
+    /// it, and an output it never listed is dropped, not sent elsewhere.
+    #[test]
+    fn ports_are_numbered_by_the_lists_and_typed_inside() {
+        let mut c = boxed(Node);
+        assert_eq!(c.inputs().iter().map(|p| p.topic.as_str()).collect::<Vec<_>>(), ["/scan/events", "laser_line"]);
+        let mut out = Outbox::default();
+        c.handle(1, &Msg::LaserLine(Arc::default()), &mut out).unwrap();
+        assert_eq!(out.items.iter().map(|(k, _)| *k).collect::<Vec<_>>(), [0], "Profiles is output 0; Never is dropped");
+        let e = c.handle(0, &Msg::ScanEvent(Arc::default()), &mut out).unwrap_err();
+        assert_eq!((e.kind(), e.to_string().as_str()), ("malformed", "unknown scan event 9"));
+        assert_eq!(out.refused, [(1, NodeError::not_ready("no pose"))], "the line's refusal under input 1");
+        let e = c.handle(1, &Msg::ScanEvent(Arc::default()), &mut out).unwrap_err();
+        assert_eq!(e.kind(), "wrong_type");
+        assert_eq!(e.to_string(), "unexpected xsurf_msgs/msg/ScanEvent on Lines, which carries xsurf_msgs/msg/LaserLine");
+        assert_eq!(c.handle(2, &Msg::ScanEvent(Arc::default()), &mut out).unwrap_err().kind(), "wrong_type");
+        assert!(c.as_any().downcast_ref::<Node>().is_some());
+        let e = NodeError::not_ready("no pose").context("line at 1.5");
+        assert_eq!((e.kind(), e.to_string().as_str()), ("not_ready", "line at 1.5: no pose"));
     }
 }

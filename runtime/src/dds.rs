@@ -12,7 +12,7 @@
 //! [`QUEUE_DEPTH`]). When the queue is full, a camera-stream (best-effort) message is dropped and
 //! counted; other messages wait (their publishers are reliable).
 
-use crate::component::{Component, Msg, Port, QosClass};
+use crate::component::{AnyComponent, Msg, Port, QosClass};
 use crate::params::{NodeParams, ParamDecl, ParamValue, Params};
 use crate::rosargs::Remap;
 use futures::StreamExt;
@@ -588,7 +588,7 @@ impl QosTable {
 }
 
 /// Runs one component as a node until SIGINT/SIGTERM. Returns the number of refused messages.
-pub fn run(env: &DdsEnv, cfg: HostConfig, component: Box<dyn Component>) -> Result<u64, HostError> {
+pub fn run(env: &DdsEnv, cfg: HostConfig, component: Box<dyn AnyComponent>) -> Result<u64, HostError> {
     run_graph(env, vec![(cfg, component)])
 }
 
@@ -597,7 +597,7 @@ pub fn run(env: &DdsEnv, cfg: HostConfig, component: Box<dyn Component>) -> Resu
 /// (name, parameters, services), every output also published on DDS for outside observers, and
 /// DDS subscriptions for the topics no component of the process publishes (and for the shared
 /// ones: tf, scan events). Returns the number of refused messages.
-pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn Component>)>) -> Result<u64, HostError> {
+pub fn run_graph(env: &DdsEnv, nodes: Vec<(HostConfig, Box<dyn AnyComponent>)>) -> Result<u64, HostError> {
     let ctx = env.context()?;
     let stop = Arc::new(AtomicBool::new(false));
     let (tx, rx) = sync_channel::<Event>(QUEUE_DEPTH);
@@ -690,7 +690,7 @@ struct Placement {
 /// parameter sets are forwarded into the host's loop as [`Event::Reconfigure`].
 fn place_nodes(
     ctx: &Context,
-    nodes: Vec<(HostConfig, Box<dyn Component>)>,
+    nodes: Vec<(HostConfig, Box<dyn AnyComponent>)>,
     tx: &SyncSender<Event>,
 ) -> Result<Placement, HostError> {
     let mut p = Placement {

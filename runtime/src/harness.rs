@@ -4,7 +4,7 @@
 //!
 //! ```
 //! # use xsurf_runtime::harness::Harness;
-//! # fn demo(component: Box<dyn xsurf_runtime::component::Component>, msg: xsurf_runtime::component::Msg) {
+//! # fn demo(component: Box<dyn xsurf_runtime::component::AnyComponent>, msg: xsurf_runtime::component::Msg) {
 //! let mut h = Harness::new(component, "edge_detector", "/cam1");
 //! h.feed("/cam1/image_raw", &msg);
 //! let lines = h.take("/cam1/laser_line");
@@ -12,7 +12,7 @@
 //! # }
 //! ```
 
-use crate::component::{Component, Msg};
+use crate::component::{AnyComponent, Msg};
 use crate::router::Router;
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -25,7 +25,7 @@ pub struct Harness {
 
 impl Harness {
     /// `component` placed as `namespace/name`.
-    pub fn new(component: Box<dyn Component>, name: &str, namespace: &str) -> Harness {
+    pub fn new(component: Box<dyn AnyComponent>, name: &str, namespace: &str) -> Harness {
         let mut router = Router::new();
         router.add(component, name, namespace, &[]);
         let published: Rc<RefCell<Vec<(String, Msg)>>> = Rc::default();

@@ -7,7 +7,7 @@
 //! lets every node publish first (two cameras' frames leave together) and only then handles what
 //! they published, so one camera's frame does not wait behind the other's whole chain.
 
-use crate::component::{Component, Msg, NodeError, Outbox, Port};
+use crate::component::{AnyComponent, Msg, NodeError, Outbox, Port};
 use crate::params::Params;
 use crate::rosargs::{fq_name, resolve_topic, Remap};
 use std::collections::HashMap;
@@ -15,7 +15,7 @@ use std::collections::HashMap;
 /// A component placed in the graph.
 pub struct Placed {
     /// The component.
-    pub component: Box<dyn Component>,
+    pub component: Box<dyn AnyComponent>,
     /// Its node name.
     pub name: String,
     /// Its namespace.
@@ -26,6 +26,8 @@ pub struct Placed {
     pub outputs: Vec<(Port, String)>,
     /// Messages it failed to handle.
     pub errors: u64,
+    /// The same, by kind ([`NodeError::kind`]).
+    pub errors_by_kind: std::collections::BTreeMap<&'static str, u64>,
     /// Messages it handled.
     pub handled: u64,
     /// Time spent in its handlers, ns.
@@ -61,6 +63,7 @@ impl Placed {
     /// the last.
     fn refuse(&mut self, input: usize, e: &NodeError) {
         self.errors += 1;
+        *self.errors_by_kind.entry(e.kind()).or_default() += 1;
         let topic = self.inputs.get(input).map_or("?", |(_, t)| t.as_str()).to_string();
         let text = format!("{topic}: {e}");
         if self.last_error.as_deref() != Some(text.as_str()) {
@@ -128,7 +131,13 @@ impl Router {
         self.tap = Some(tap);
     }
     /// Adds a component as node `namespace/name` with remaps; returns its index.
-    pub fn add(&mut self, mut component: Box<dyn Component>, name: &str, namespace: &str, remaps: &[Remap]) -> usize {
+    pub fn add(
+        &mut self,
+        mut component: Box<dyn AnyComponent>,
+        name: &str,
+        namespace: &str,
+        remaps: &[Remap],
+    ) -> usize {
         component.set_identity(name, namespace);
         let resolve = |p: Port| {
             let t = resolve_topic(&p.topic, namespace, name, remaps);
@@ -147,6 +156,7 @@ impl Router {
             inputs,
             outputs,
             errors: 0,
+            errors_by_kind: Default::default(),
             handled: 0,
             busy_ns: 0,
             last_error: None,
@@ -265,7 +275,7 @@ impl Router {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::component::{NodeError, QosClass};
+    use crate::component::{Component, NodeError, QosClass};
     use crate::params::ParamError;
     use std::sync::{Arc, Mutex};
     use xsurf_msgs::sensor_msgs::Image;
@@ -287,14 +297,16 @@ mod tests {
         }
     }
     impl Component for Node {
+        type Input = usize;
+        type Output = usize;
         fn node_name(&self) -> &'static str {
             "n"
         }
-        fn inputs(&self) -> Vec<Port> {
-            self.input.iter().map(|t| Port::new(t, Image::TYPE_NAME, QosClass::Reliable)).collect()
+        fn inputs(&self) -> Vec<(usize, Port)> {
+            self.input.iter().map(|t| (0, Port::new(t, Image::TYPE_NAME, QosClass::Reliable))).collect()
         }
-        fn outputs(&self) -> Vec<Port> {
-            vec![Port::new(self.out, Image::TYPE_NAME, QosClass::Reliable)]
+        fn outputs(&self) -> Vec<(usize, Port)> {
+            vec![(0, Port::new(self.out, Image::TYPE_NAME, QosClass::Reliable))]
         }
         fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
             Ok(())
@@ -318,7 +330,7 @@ mod tests {
         let seen = Arc::new(Mutex::new(Vec::new()));
         let tapped = Arc::new(Mutex::new(Vec::new()));
         let mut r = Router::new();
-        let node = |input, out| Box::new(Node { input, out, seen: seen.clone() });
+        let node = |input, out| crate::component::boxed(Node { input, out, seen: seen.clone() });
         r.add(node(None, "/a"), "a", "/", &[]);
         r.add(node(None, "/b"), "b", "/", &[]);
         r.add(node(Some("/a"), "/a2"), "a2", "/", &[]);

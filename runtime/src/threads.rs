@@ -408,14 +408,16 @@ mod tests {
         }
     }
     impl Component for Node {
+        type Input = usize;
+        type Output = usize;
         fn node_name(&self) -> &'static str {
             "n"
         }
-        fn inputs(&self) -> Vec<Port> {
-            self.input.iter().map(|(t, q)| Port::new(t, Image::TYPE_NAME, *q)).collect()
+        fn inputs(&self) -> Vec<(usize, Port)> {
+            self.input.iter().map(|(t, q)| (0, Port::new(t, Image::TYPE_NAME, *q))).collect()
         }
-        fn outputs(&self) -> Vec<Port> {
-            vec![Port::new(self.out, Image::TYPE_NAME, QosClass::Sensor)]
+        fn outputs(&self) -> Vec<(usize, Port)> {
+            vec![(0, Port::new(self.out, Image::TYPE_NAME, QosClass::Sensor))]
         }
         fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
             Ok(())
@@ -446,7 +448,7 @@ mod tests {
         let mut r = Router::new();
         for (i, (input, out, work)) in nodes.into_iter().enumerate() {
             let n = Node { input, out, work, seen: seen.clone(), count: 0 };
-            r.add(Box::new(n), &format!("n{i}"), "/", &[]);
+            r.add(crate::component::boxed(n), &format!("n{i}"), "/", &[]);
         }
         (r, seen)
     }
@@ -486,13 +488,15 @@ mod tests {
     /// Panics on its first message.
     struct Fragile;
     impl Component for Fragile {
+        type Input = usize;
+        type Output = usize;
         fn node_name(&self) -> &'static str {
             "fragile"
         }
-        fn inputs(&self) -> Vec<Port> {
-            vec![Port::new("/a", Image::TYPE_NAME, QosClass::Reliable)]
+        fn inputs(&self) -> Vec<(usize, Port)> {
+            vec![(0, Port::new("/a", Image::TYPE_NAME, QosClass::Reliable))]
         }
-        fn outputs(&self) -> Vec<Port> {
+        fn outputs(&self) -> Vec<(usize, Port)> {
             Vec::new()
         }
         fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
@@ -506,7 +510,7 @@ mod tests {
     #[test]
     fn a_node_that_dies_is_named_and_the_rest_still_shut_down() {
         let (mut r, _) = graph(vec![(None, "/a", Duration::ZERO)]);
-        r.add(Box::new(Fragile), "fragile", "/x", &[]);
+        r.add(crate::component::boxed(Fragile), "fragile", "/x", &[]);
         let tap: SharedTap = Arc::new(|_: &str, _: &Msg| {});
         let g = Threads::start(r, tap, &[Duration::from_millis(5), Duration::from_millis(50)], false).unwrap();
         let t0 = Instant::now();
@@ -542,13 +546,15 @@ mod tests {
         newest: Arc<Mutex<u32>>,
     }
     impl Component for SlowTicker {
+        type Input = usize;
+        type Output = usize;
         fn node_name(&self) -> &'static str {
             "camera"
         }
-        fn inputs(&self) -> Vec<Port> {
-            vec![Port::new("/pose", Image::TYPE_NAME, QosClass::Reliable)]
+        fn inputs(&self) -> Vec<(usize, Port)> {
+            vec![(0, Port::new("/pose", Image::TYPE_NAME, QosClass::Reliable))]
         }
-        fn outputs(&self) -> Vec<Port> {
+        fn outputs(&self) -> Vec<(usize, Port)> {
             Vec::new()
         }
         fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
@@ -570,7 +576,7 @@ mod tests {
     fn a_slow_ticker_takes_what_is_waiting_before_its_next_tick() {
         let (mut r, _) = graph(vec![(None, "/pose", Duration::ZERO)]);
         let newest: Arc<Mutex<u32>> = Arc::default();
-        r.add(Box::new(SlowTicker { newest: newest.clone() }), "camera", "/", &[]);
+        r.add(crate::component::boxed(SlowTicker { newest: newest.clone() }), "camera", "/", &[]);
         let published: Arc<Mutex<u32>> = Arc::default();
         let p = published.clone();
         let tap: SharedTap = Arc::new(move |_: &str, m: &Msg| *p.lock().unwrap() = tag(m));
@@ -606,13 +612,15 @@ mod tests {
         handled: Arc<AtomicU64>,
     }
     impl Component for Stuck {
+        type Input = usize;
+        type Output = usize;
         fn node_name(&self) -> &'static str {
             "stuck"
         }
-        fn inputs(&self) -> Vec<Port> {
-            vec![Port::new("/x", Image::TYPE_NAME, QosClass::Reliable)]
+        fn inputs(&self) -> Vec<(usize, Port)> {
+            vec![(0, Port::new("/x", Image::TYPE_NAME, QosClass::Reliable))]
         }
-        fn outputs(&self) -> Vec<Port> {
+        fn outputs(&self) -> Vec<(usize, Port)> {
             Vec::new()
         }
         fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
@@ -632,7 +640,7 @@ mod tests {
     fn a_full_inbox_waits_then_drops_and_counts() {
         let mut r = Router::new();
         let handled = Arc::new(AtomicU64::new(0));
-        r.add(Box::new(Stuck { handled: handled.clone() }), "stuck", "/", &[]);
+        r.add(crate::component::boxed(Stuck { handled: handled.clone() }), "stuck", "/", &[]);
         let tap: SharedTap = Arc::new(|_: &str, _: &Msg| {});
         let g = Threads::start(r, tap, &[Duration::from_millis(50)], false).unwrap();
         let msg = frame(1);

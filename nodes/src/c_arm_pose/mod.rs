@@ -24,7 +24,7 @@ pub use params::*;
 
 /// The node type, as the registry lists it.
 pub const NODE: crate::registry::NodeType =
-    crate::registry::NodeType::of::<CArmPoseParams>("c_arm_pose", crate::registry::Role::Source, 2, |p| Ok(Box::new(CArmPoseNode::new(p)?)));
+    crate::registry::NodeType::of::<CArmPoseParams>("c_arm_pose", crate::registry::Role::Source, 2, |p| Ok(boxed(CArmPoseNode::new(p)?)));
 
 use crate::convert;
 use std::path::PathBuf;
@@ -37,7 +37,7 @@ use xsurf_msgs::sensor_msgs::JointState;
 use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
-use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::component::{boxed, Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 struct Config {
@@ -133,13 +133,31 @@ pub struct CArmPoseNode {
     placements_applied: u64,
 }
 
-const IN_REQUEST: usize = 0;
-const IN_ENCODER: usize = 1;
-const IN_PLACEMENTS: usize = 2;
-const OUT_TF: usize = 0;
-const OUT_STATIC: usize = 1;
-const OUT_JOINTS: usize = 2;
-const OUT_EVENTS: usize = 3;
+/// The C-arm pose node's inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Input {
+    /// `/scan/request`: START, END or ABORT asked for by the hospital stack.
+    Request,
+    /// `/carm/encoder`: the scanner controller's position feed (`mode: encoder`).
+    Encoder,
+    /// `/surface/placements`: the cameras' placements refined by the merger.
+    Placements,
+}
+
+/// The C-arm pose node's outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// `/tf`: `table -> carm`.
+    Tf,
+    /// `/tf_static`: `carm -> <cam>_optical_frame` of every rig camera.
+    TfStatic,
+    /// `/joint_states`: `carm_travel`, `carm_angle`.
+    Joints,
+    /// `/scan/events`: START, END, ABORT.
+    Events,
+}
+
+type Out = Outbox<Input, Output>;
 
 impl CArmPoseNode {
     /// Builds the node from its parameters.
@@ -163,7 +181,7 @@ impl CArmPoseNode {
     }
 
     /// `carm -> <cam>_optical_frame` of every rig camera on `/tf_static`.
-    fn publish_statics(&self, now: i64, out: &mut Outbox) {
+    fn publish_statics(&self, now: i64, out: &mut Out) {
         let tf = TFMessage {
             transforms: self
                 .cfg
@@ -180,7 +198,7 @@ impl CArmPoseNode {
                 })
                 .collect(),
         };
-        out.publish(OUT_STATIC, Msg::Tf(Arc::new(tf)));
+        out.publish(Output::TfStatic, Msg::Tf(Arc::new(tf)));
     }
 
     /// Takes the refined placements of a `/surface/placements` message (applied between scans).
@@ -191,7 +209,7 @@ impl CArmPoseNode {
         for t in &m.transforms {
             let (parent, child) = (t.header.frame_id.trim_start_matches('/'), t.child_frame_id.trim_start_matches('/'));
             if parent != self.cfg.carm_frame {
-                return Err(NodeError::new(format!(
+                return Err(NodeError::contradicts(format!(
                     "/surface/placements: transform to {child} is from {parent:?}, not from {:?}",
                     self.cfg.carm_frame
                 )));
@@ -200,11 +218,11 @@ impl CArmPoseNode {
                 .strip_suffix("_optical_frame")
                 .and_then(|n| self.cfg.rig.cameras.iter().position(|c| c.name == n));
             let Some(cam) = cam else {
-                return Err(NodeError::new(format!(
+                return Err(NodeError::contradicts(format!(
                     "/surface/placements: {child} is not a rig camera's optical frame"
                 )));
             };
-            let iso = convert::rigid(t).map_err(|e| NodeError::new(format!("/surface/placements: {e}")))?;
+            let iso = convert::rigid(t).map_err(|e| NodeError::malformed(format!("/surface/placements: {e}")))?;
             taken.push((cam, iso));
         }
         self.placements.extend(taken);
@@ -239,7 +257,7 @@ impl CArmPoseNode {
 
     /// Ends the current scan with `event` (END or ABORT) at `stamp`; speed mode: the C-arm
     /// stands at `at` (None: at the end of travel).
-    fn finish_scan(&mut self, stamp: i64, event: u8, why: &str, at: Option<f64>, out: &mut Outbox) {
+    fn finish_scan(&mut self, stamp: i64, event: u8, why: &str, at: Option<f64>, out: &mut Out) {
         if !self.scanning() {
             return;
         }
@@ -251,22 +269,22 @@ impl CArmPoseNode {
             self.aborts += 1;
             log::warn!("c_arm_pose: scan {} aborted: {why}", self.scan_id);
         }
-        out.publish(OUT_EVENTS, self.event(stamp, event));
+        out.publish(Output::Events, self.event(stamp, event));
         self.scan_id += 1;
     }
 
-    fn begin_scan(&mut self, stamp: i64, out: &mut Outbox) {
+    fn begin_scan(&mut self, stamp: i64, out: &mut Out) {
         if self.scanning() {
             return;
         }
         self.scan = Scan::Running(stamp);
-        out.publish(OUT_EVENTS, self.event(stamp, ScanEvent::START));
+        out.publish(Output::Events, self.event(stamp, ScanEvent::START));
     }
 
-    fn publish_pose(&self, stamp: i64, travel: f64, angle: f64, velocity: f64, out: &mut Outbox) {
+    fn publish_pose(&self, stamp: i64, travel: f64, angle: f64, velocity: f64, out: &mut Out) {
         let pose = table_from_carm(travel, 0.0, angle);
         out.publish(
-            OUT_TF,
+            Output::Tf,
             Msg::Tf(Arc::new(TFMessage {
                 transforms: vec![convert::transform_stamped(stamp, &self.cfg.table_frame, &self.cfg.carm_frame, &pose)],
             })),
@@ -278,18 +296,18 @@ impl CArmPoseNode {
             velocity: vec![velocity, 0.0],
             effort: vec![],
         };
-        out.publish(OUT_JOINTS, Msg::JointState(Arc::new(js)));
+        out.publish(Output::Joints, Msg::JointState(Arc::new(js)));
     }
 
     /// One encoder sample.
-    fn encoder_sample(&mut self, m: &JointStateMsg, out: &mut Outbox) -> Result<(), NodeError> {
+    fn encoder_sample(&mut self, m: &JointStateMsg, out: &mut Out) -> Result<(), NodeError> {
         let i = m.name.iter().position(|n| *n == self.cfg.joint).ok_or_else(|| {
             self.bad_samples += 1;
-            NodeError::new(format!("/carm/encoder: no joint {:?} in {:?}", self.cfg.joint, m.name))
+            NodeError::malformed(format!("/carm/encoder: no joint {:?} in {:?}", self.cfg.joint, m.name))
         })?;
         let travel = m.position.get(i).copied().filter(|v| v.is_finite()).ok_or_else(|| {
             self.bad_samples += 1;
-            NodeError::new(format!("/carm/encoder: joint {:?} has no finite position", self.cfg.joint))
+            NodeError::malformed(format!("/carm/encoder: joint {:?} has no finite position", self.cfg.joint))
         })?;
         let angle =
             m.name.iter().position(|n| n == "carm_angle").and_then(|j| m.position.get(j).copied()).unwrap_or(0.0);
@@ -328,22 +346,24 @@ impl CArmPoseNode {
 }
 
 impl Component for CArmPoseNode {
+    type Input = Input;
+    type Output = Output;
     fn node_name(&self) -> &'static str {
         "c_arm_pose"
     }
-    fn inputs(&self) -> Vec<Port> {
+    fn inputs(&self) -> Vec<(Input, Port)> {
         vec![
-            Port::new("/scan/request", ScanEvent::TYPE_NAME, QosClass::Reliable),
-            Port::new("/carm/encoder", JointState::TYPE_NAME, QosClass::Reliable),
-            Port::new("/surface/placements", TFMessage::TYPE_NAME, QosClass::Reliable),
+            (Input::Request, Port::new("/scan/request", ScanEvent::TYPE_NAME, QosClass::Reliable)),
+            (Input::Encoder, Port::new("/carm/encoder", JointState::TYPE_NAME, QosClass::Reliable)),
+            (Input::Placements, Port::new("/surface/placements", TFMessage::TYPE_NAME, QosClass::Reliable)),
         ]
     }
-    fn outputs(&self) -> Vec<Port> {
+    fn outputs(&self) -> Vec<(Output, Port)> {
         vec![
-            Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable),
-            Port::new("/tf_static", TFMessage::TYPE_NAME, QosClass::Static),
-            Port::new("/joint_states", JointState::TYPE_NAME, QosClass::Reliable),
-            Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
+            (Output::Tf, Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable)),
+            (Output::TfStatic, Port::new("/tf_static", TFMessage::TYPE_NAME, QosClass::Static)),
+            (Output::Joints, Port::new("/joint_states", JointState::TYPE_NAME, QosClass::Reliable)),
+            (Output::Events, Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable)),
         ]
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
@@ -358,9 +378,9 @@ impl Component for CArmPoseNode {
         self.cfg = c;
         Ok(())
     }
-    fn handle(&mut self, i: usize, m: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+    fn handle(&mut self, i: Input, m: &Msg, out: &mut Out) -> Result<(), NodeError> {
         match (i, m) {
-            (IN_REQUEST, Msg::ScanEvent(e)) => {
+            (Input::Request, Msg::ScanEvent(e)) => {
                 let stamp = e.header.stamp.nanos();
                 match e.event {
                     ScanEvent::START if self.cfg.encoder => {
@@ -381,18 +401,18 @@ impl Component for CArmPoseNode {
                         let at = (!self.cfg.encoder).then(|| self.travel(stamp));
                         self.finish_scan(stamp, event, why, at, out);
                     }
-                    other => return Err(NodeError::new(format!("/scan/request: unknown event {other}"))),
+                    other => return Err(NodeError::malformed(format!("/scan/request: unknown event {other}"))),
                 }
                 Ok(())
             }
-            (IN_ENCODER, Msg::JointState(js)) if self.cfg.encoder => self.encoder_sample(js, out),
-            (IN_ENCODER, Msg::JointState(_)) => Ok(()),
-            (IN_PLACEMENTS, Msg::Tf(t)) if self.cfg.follow_placements => self.take_placements(t),
-            (IN_PLACEMENTS, Msg::Tf(_)) => Ok(()),
-            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+            (Input::Encoder, Msg::JointState(js)) if self.cfg.encoder => self.encoder_sample(js, out),
+            (Input::Encoder, Msg::JointState(_)) => Ok(()),
+            (Input::Placements, Msg::Tf(t)) if self.cfg.follow_placements => self.take_placements(t),
+            (Input::Placements, Msg::Tf(_)) => Ok(()),
+            (i, m) => Err(NodeError::unexpected(i, m)),
         }
     }
-    fn tick(&mut self, now: i64, out: &mut Outbox) {
+    fn tick(&mut self, now: i64, out: &mut Out) {
         if !self.scanning() && !self.placements.is_empty() {
             for (cam, e) in std::mem::take(&mut self.placements) {
                 let c = &mut self.cfg.rig.cameras[cam];
@@ -423,7 +443,7 @@ impl Component for CArmPoseNode {
         if let Scan::Scheduled(t0) = self.scan {
             if now >= t0 {
                 self.scan = Scan::Running(t0);
-                out.publish(OUT_EVENTS, self.event(t0, ScanEvent::START));
+                out.publish(Output::Events, self.event(t0, ScanEvent::START));
             }
         }
         if now.saturating_sub(self.last_pub) >= self.cfg.period_ns {

@@ -13,7 +13,7 @@ pub use params::*;
 
 /// The node type, as the registry lists it.
 pub const NODE: crate::registry::NodeType =
-    crate::registry::NodeType::of::<CameraDriverParams>("camera_driver", crate::registry::Role::Source, 2, |p| Ok(Box::new(CameraDriverNode::new(p)?)));
+    crate::registry::NodeType::of::<CameraDriverParams>("camera_driver", crate::registry::Role::Source, 2, |p| Ok(boxed(CameraDriverNode::new(p)?)));
 
 use crate::edge_detector::Transport;
 use crate::convert;
@@ -27,7 +27,7 @@ use xsurf_msgs::std_msgs::StringMsg;
 use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
-use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::component::{boxed, Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 /// Where the images come from, as the parameters describe it.
@@ -167,10 +167,27 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     })
 }
 
-const OUT_REPORT: usize = 2;
+/// The camera driver's inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Input {
+    /// `/tf`: the C-arm's pose, for the synthetic camera.
+    Tf,
+    /// `/scan/events`: the laser on between START and END, and the scans for the reports.
+    Events,
+}
 
-const OUT_IMAGE: usize = 0;
-const OUT_INFO: usize = 1;
+/// The camera driver's outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// `image_raw` (or `image_raw/compressed`, by `image_transport`).
+    Image,
+    /// `camera_info`, stamped as its image.
+    CameraInfo,
+    /// `/scan/report`: this camera's account of each scan.
+    Report,
+}
+
+type Out = Outbox<Input, Output>;
 
 /// The camera driver component.
 pub struct CameraDriverNode {
@@ -210,7 +227,7 @@ impl CameraDriverNode {
 
     /// Publishes a frame and its camera_info, both stamped with the frame's stamp in the
     /// camera's optical frame.
-    fn publish_frame(&mut self, f: source::Frame, out: &mut Outbox) {
+    fn publish_frame(&mut self, f: source::Frame, out: &mut Out) {
         let stamp = f.stamp_ns;
         let header = convert::header(stamp, &format!("{}_optical_frame", self.camera));
         let image = match self.cfg.compressed {
@@ -226,14 +243,14 @@ impl CameraDriverNode {
                 }
             },
         };
-        out.publish(OUT_INFO, Msg::CameraInfo(Arc::new(convert::camera_info(&f.model, header))));
-        out.publish(OUT_IMAGE, image);
+        out.publish(Output::CameraInfo, Msg::CameraInfo(Arc::new(convert::camera_info(&f.model, header))));
+        out.publish(Output::Image, image);
         self.frames += 1;
         self.tally.count(stamp);
     }
 
     /// The frames the source has now, published.
-    fn take_frames(&mut self, now_ns: i64, slot_ns: i64, out: &mut Outbox) {
+    fn take_frames(&mut self, now_ns: i64, slot_ns: i64, out: &mut Out) {
         let ctx = source::Context {
             cfg: &self.cfg,
             camera: &self.camera,
@@ -260,6 +277,8 @@ impl CameraDriverNode {
 }
 
 impl Component for CameraDriverNode {
+    type Input = Input;
+    type Output = Output;
     fn node_name(&self) -> &'static str {
         "camera_driver"
     }
@@ -268,20 +287,21 @@ impl Component for CameraDriverNode {
             self.camera = namespace.trim_matches('/').rsplit('/').next().unwrap_or("").to_string();
         }
     }
-    fn inputs(&self) -> Vec<Port> {
+    fn inputs(&self) -> Vec<(Input, Port)> {
         vec![
-            Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable),
-            Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
+            (Input::Tf, Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable)),
+            (Input::Events, Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable)),
         ]
     }
-    fn outputs(&self) -> Vec<Port> {
+    fn outputs(&self) -> Vec<(Output, Port)> {
+        let image = match self.cfg.compressed {
+            None => Port::new("image_raw", Image::TYPE_NAME, QosClass::Sensor),
+            Some(_) => Port::new("image_raw/compressed", CompressedImage::TYPE_NAME, QosClass::Sensor),
+        };
         vec![
-            match self.cfg.compressed {
-                None => Port::new("image_raw", Image::TYPE_NAME, QosClass::Sensor),
-                Some(_) => Port::new("image_raw/compressed", CompressedImage::TYPE_NAME, QosClass::Sensor),
-            },
-            Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
-            Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
+            (Output::Image, image),
+            (Output::CameraInfo, Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor)),
+            (Output::Report, Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable)),
         ]
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
@@ -291,15 +311,15 @@ impl Component for CameraDriverNode {
         }
         Ok(())
     }
-    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+    fn handle(&mut self, input: Input, msg: &Msg, out: &mut Out) -> Result<(), NodeError> {
         match (input, msg) {
-            (0, Msg::Tf(tf)) => {
+            (Input::Tf, Msg::Tf(tf)) => {
                 for t in &tf.transforms {
                     if t.header.frame_id.trim_start_matches('/') == self.cfg.table_frame
                         && t.child_frame_id.trim_start_matches('/') == self.cfg.carm_frame
                     {
                         // A pose that is not rigid is refused: the camera renders from the last good.
-                        let pose = convert::rigid(t).map_err(NodeError::new)?;
+                        let pose = convert::rigid(t).map_err(NodeError::malformed)?;
                         let s = t.header.stamp.nanos();
                         if self.poses[0].is_none_or(|(t0, _)| s > t0) {
                             self.poses[1] = self.poses[0];
@@ -309,19 +329,19 @@ impl Component for CameraDriverNode {
                 }
                 Ok(())
             }
-            (1, Msg::ScanEvent(e)) => {
+            (Input::Events, Msg::ScanEvent(e)) => {
                 self.laser_on = match e.event {
                     ScanEvent::START => true,
                     ScanEvent::END | ScanEvent::ABORT => false,
                     // An event no scan has does not turn the laser off in the middle of one.
-                    other => return Err(NodeError::new(format!("unknown scan event {other}"))),
+                    other => return Err(NodeError::malformed(format!("unknown scan event {other}"))),
                 };
                 if let Some(report) = self.tally.event(e, crate::tally::Stage::CameraDriver, &self.camera) {
-                    out.publish(OUT_REPORT, report);
+                    out.publish(Output::Report, report);
                 }
                 Ok(())
             }
-            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+            (i, m) => Err(NodeError::unexpected(i, m)),
         }
     }
     /// The next frame's time, so that a frame leaves on time rather than at the host's next tick
@@ -332,9 +352,9 @@ impl Component for CameraDriverNode {
         }
         self.next_ns
     }
-    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+    fn tick(&mut self, now_ns: i64, out: &mut Out) {
         if let Some(report) = self.tally.due(now_ns) {
-            out.publish(OUT_REPORT, report);
+            out.publish(Output::Report, report);
         }
         if !self.source.paced() {
             self.take_frames(now_ns, now_ns, out);
@@ -354,9 +374,9 @@ impl Component for CameraDriverNode {
         self.next_ns = Some(slot + self.cfg.period_ns);
         self.take_frames(now_ns, slot, out);
     }
-    fn finish(&mut self, out: &mut Outbox) {
+    fn finish(&mut self, out: &mut Out) {
         if let Some(report) = self.tally.report() {
-            out.publish(OUT_REPORT, report);
+            out.publish(Output::Report, report);
         }
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
@@ -393,7 +413,7 @@ mod tests {
                 assert!(e.to_string().contains("source") && e.to_string().contains("--features v4l2"), "{e}");
             }
             (true, Ok(mut node)) => {
-                let mut out = Outbox::default();
+                let mut out = Out::default();
                 for k in 0..3 {
                     node.tick(k * 600_000_000, &mut out);
                 }
@@ -511,7 +531,7 @@ mod tests {
         )
         .unwrap();
         let mut node = CameraDriverNode::new(&p).unwrap();
-        let mut out = Outbox::default();
+        let mut out = Out::default();
         let t0 = 5_000_000_000i64;
         for late_ms in [0, 10, 45, 50] {
             node.tick(t0 + late_ms * 1_000_000, &mut out);

@@ -5,7 +5,7 @@ pub use params::*;
 
 /// The node type, as the registry lists it.
 pub const NODE: crate::registry::NodeType =
-    crate::registry::NodeType::of::<EdgeParams>("edge_detector", crate::registry::Role::PerCamera, 50, |p| Ok(Box::new(EdgeDetectorNode::new(p)?)));
+    crate::registry::NodeType::of::<EdgeParams>("edge_detector", crate::registry::Role::PerCamera, 50, |p| Ok(boxed(EdgeDetectorNode::new(p)?)));
 
 use crate::convert;
 use std::sync::Arc;
@@ -16,7 +16,7 @@ use xsurf_msgs::std_msgs::StringMsg;
 use xsurf_msgs::xsurf_msgs::LaserLine as LineMsg;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
-use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::component::{boxed, Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 /// The edge detector component.
@@ -36,12 +36,33 @@ pub struct EdgeDetectorNode {
     tally: crate::tally::ScanTally,
 }
 
-const IN_IMAGE: usize = 0;
-const IN_INFO: usize = 1;
-const IN_EVENTS: usize = 2;
-const OUT_REPORT: usize = 1;
+/// The edge detector's inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Input {
+    /// `image_raw` (or `image_raw/compressed`, by `image_transport`).
+    Image,
+    /// `camera_info`: the image size every image must have.
+    CameraInfo,
+    /// `/scan/events`: the scans, for the reports.
+    Events,
+}
+
+/// The edge detector's outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// `laser_line`: one per image.
+    Line,
+    /// `/scan/report`: this camera's account of each scan.
+    Report,
+}
+
+type Out = Outbox<Input, Output>;
 
 impl EdgeDetectorNode {
+    /// Frames in which a line was found, so far.
+    pub fn frames_with_line(&self) -> u64 {
+        self.frames_with_line
+    }
     /// Builds the node from its parameters.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
         let p = EdgeParams::from_params(p)?;
@@ -61,7 +82,7 @@ impl EdgeDetectorNode {
     }
 
     /// Finds the line in one image.
-    fn image(&mut self, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+    fn image(&mut self, msg: &Msg, out: &mut Out) -> Result<(), NodeError> {
         let at = |h: &xsurf_msgs::std_msgs::Header| format!("{}.{:09}", h.stamp.sec, h.stamp.nanosec);
         // A compressed image is decoded once, here where it enters the pipeline.
         let decoded;
@@ -69,46 +90,50 @@ impl EdgeDetectorNode {
             Msg::Image(img) => {
                 let view = convert::image_view(img).map_err(|e| {
                     self.bad_images += 1;
-                    NodeError::new(format!("image at {}: {e}", at(&img.header)))
+                    NodeError::malformed(format!("image at {}: {e}", at(&img.header)))
                 })?;
                 (view, &img.header)
             }
             Msg::CompressedImage(c) => {
                 decoded = xsurf_formats::compressed::decode(&c.format, &c.data).map_err(|e| {
                     self.bad_images += 1;
-                    NodeError::new(format!("compressed image at {}: {e}", at(&c.header)))
+                    NodeError::malformed(format!("compressed image at {}: {e}", at(&c.header)))
                 })?;
-                (decoded.view().map_err(NodeError::new)?, &c.header)
+                (decoded.view().map_err(NodeError::malformed)?, &c.header)
             }
-            other => return Err(NodeError::new(format!("expected an image, got {}", other.type_name()))),
+            other => {
+                return Err(NodeError::unexpected(Input::Image, other))
+            }
         };
         // An image that contradicts its camera is refused where it enters.
         if let Some((w, h)) = self.camera_size.filter(|&s| s != (view.width(), view.height())) {
             self.bad_images += 1;
-            return Err(NodeError::new(format!(
+            return Err(NodeError::contradicts(format!(
                 "image at {} is {}x{}, camera_info says {w}x{h}",
                 at(header),
                 view.width(),
                 view.height()
             )));
         }
-        let stats = self.detector.detect(&view, &mut self.line).map_err(NodeError::new)?;
+        let stats = self.detector.detect(&view, &mut self.line).map_err(NodeError::malformed)?;
         self.frames += 1;
         self.samples_found += u64::from(stats.found);
         self.frames_with_line += u64::from(stats.found > 0);
-        out.publish(0, Msg::LaserLine(Arc::new(convert::line_msg(&self.line, header.clone()))));
+        out.publish(Output::Line, Msg::LaserLine(Arc::new(convert::line_msg(&self.line, header.clone()))));
         Ok(())
     }
 }
 
 impl Component for EdgeDetectorNode {
+    type Input = Input;
+    type Output = Output;
     fn node_name(&self) -> &'static str {
         "edge_detector"
     }
     fn set_identity(&mut self, _name: &str, namespace: &str) {
         self.camera = namespace.trim_matches('/').rsplit('/').next().unwrap_or("").to_string();
     }
-    fn inputs(&self) -> Vec<Port> {
+    fn inputs(&self) -> Vec<(Input, Port)> {
         let image = match self.transport {
             Transport::Raw => Port::new("image_raw", xsurf_msgs::sensor_msgs::Image::TYPE_NAME, QosClass::Sensor),
             Transport::Compressed => {
@@ -116,15 +141,15 @@ impl Component for EdgeDetectorNode {
             }
         };
         vec![
-            image,
-            Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
-            Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
+            (Input::Image, image),
+            (Input::CameraInfo, Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor)),
+            (Input::Events, Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable)),
         ]
     }
-    fn outputs(&self) -> Vec<Port> {
+    fn outputs(&self) -> Vec<(Output, Port)> {
         vec![
-            Port::new("laser_line", LineMsg::TYPE_NAME, QosClass::Reliable),
-            Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
+            (Output::Line, Port::new("laser_line", LineMsg::TYPE_NAME, QosClass::Reliable)),
+            (Output::Report, Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable)),
         ]
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
@@ -135,11 +160,11 @@ impl Component for EdgeDetectorNode {
         self.detector = EdgeDetector::new(p.config()?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
         Ok(())
     }
-    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+    fn handle(&mut self, input: Input, msg: &Msg, out: &mut Out) -> Result<(), NodeError> {
         match (input, msg) {
-            (IN_INFO, Msg::CameraInfo(i)) => {
+            (Input::CameraInfo, Msg::CameraInfo(i)) => {
                 if !limits::image_side_ok(i.width) || !limits::image_side_ok(i.height) {
-                    return Err(NodeError::new(format!(
+                    return Err(NodeError::malformed(format!(
                         "camera_info size {}x{} is outside {} pixels a side",
                         i.width,
                         i.height,
@@ -149,13 +174,13 @@ impl Component for EdgeDetectorNode {
                 self.camera_size = Some((i.width, i.height));
                 Ok(())
             }
-            (IN_EVENTS, Msg::ScanEvent(e)) => {
+            (Input::Events, Msg::ScanEvent(e)) => {
                 if let Some(report) = self.tally.event(e, crate::tally::Stage::EdgeDetector, &self.camera) {
-                    out.publish(OUT_REPORT, report);
+                    out.publish(Output::Report, report);
                 }
                 Ok(())
             }
-            (IN_IMAGE, _) => {
+            (Input::Image, _) => {
                 let r = self.image(msg, out);
                 if let Some(stamp) = msg.stamp_ns() {
                     match &r {
@@ -165,17 +190,17 @@ impl Component for EdgeDetectorNode {
                 }
                 r
             }
-            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+            (i, m) => Err(NodeError::unexpected(i, m)),
         }
     }
-    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+    fn tick(&mut self, now_ns: i64, out: &mut Out) {
         if let Some(report) = self.tally.due(now_ns) {
-            out.publish(OUT_REPORT, report);
+            out.publish(Output::Report, report);
         }
     }
-    fn finish(&mut self, out: &mut Outbox) {
+    fn finish(&mut self, out: &mut Out) {
         if let Some(report) = self.tally.report() {
-            out.publish(OUT_REPORT, report);
+            out.publish(Output::Report, report);
         }
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
@@ -213,15 +238,15 @@ mod tests {
     fn images_that_contradict_camera_info_are_refused() {
         let params = Params::resolve(&EdgeParams::declarations(), &Default::default()).unwrap();
         let mut n = EdgeDetectorNode::new(&params).unwrap();
-        let mut out = Outbox::default();
+        let mut out = Out::default();
         // Before any camera_info, an image is taken as it is.
-        n.handle(IN_IMAGE, &frame(80, 60, 40, 1), &mut out).unwrap();
+        n.handle(Input::Image, &frame(80, 60, 40, 1), &mut out).unwrap();
         let info = CameraInfo { width: 64, height: 40, ..Default::default() };
-        n.handle(IN_INFO, &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
-        let e = n.handle(IN_IMAGE, &frame(16, 12, 5, 2), &mut out).unwrap_err();
+        n.handle(Input::CameraInfo, &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
+        let e = n.handle(Input::Image, &frame(16, 12, 5, 2), &mut out).unwrap_err();
         assert!(e.to_string().contains("image at 2.000000000 is 16x12, camera_info says 64x40"), "{e}");
         for sec in 3..6 {
-            n.handle(IN_IMAGE, &frame(64, 40, 30, sec), &mut out).unwrap();
+            n.handle(Input::Image, &frame(64, 40, 30, sec), &mut out).unwrap();
         }
         assert_eq!((n.frames, n.bad_images, n.frames_with_line), (4, 1, 4));
         assert_eq!(out.items.len(), 4, "one laser_line per image taken");
@@ -230,8 +255,8 @@ mod tests {
         assert!((l.u[20] - 30.0).abs() < 0.05, "{}", l.u[20]);
         // A camera_info that no camera has is refused by name and changes nothing.
         let bad = CameraInfo { width: 0, height: 40, ..Default::default() };
-        let e = n.handle(IN_INFO, &Msg::CameraInfo(Arc::new(bad)), &mut out).unwrap_err();
+        let e = n.handle(Input::CameraInfo, &Msg::CameraInfo(Arc::new(bad)), &mut out).unwrap_err();
         assert!(e.to_string().contains("camera_info size 0x40"), "{e}");
-        n.handle(IN_IMAGE, &frame(64, 40, 30, 7), &mut out).unwrap();
+        n.handle(Input::Image, &frame(64, 40, 30, 7), &mut out).unwrap();
     }
 }

@@ -26,7 +26,7 @@ pub use params::*;
 
 /// The node type, as the registry lists it.
 pub const NODE: crate::registry::NodeType =
-    crate::registry::NodeType::of::<MergerParams>("merger", crate::registry::Role::Scanner, 50, |p| Ok(Box::new(MergerNode::new(p)?)));
+    crate::registry::NodeType::of::<MergerParams>("merger", crate::registry::Role::Scanner, 50, |p| Ok(boxed(MergerNode::new(p)?)));
 
 use crate::convert;
 use crate::scan_report::{CameraAccount, MesherReport, Report, ScanReport, StageReport};
@@ -48,7 +48,7 @@ use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
-use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::component::{boxed, Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 struct Config {
@@ -159,10 +159,18 @@ pub struct MergerNode {
     /// The scan's C-arm motion so far.
     motion: Option<CarmMotion>,
     /// The last merge's cloud and mesh, published again between scans.
-    last_outputs: crate::republish::Republisher,
+    last_outputs: crate::republish::Republisher<Output>,
 }
 
 impl MergerNode {
+    /// Points of the merged clouds, so far.
+    pub fn points(&self) -> u64 {
+        self.points
+    }
+    /// Triangles of the merged surfaces, so far.
+    pub fn triangles(&self) -> u64 {
+        self.triangles
+    }
     /// Builds the node from its parameters.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
         let cfg = config(p)?;
@@ -199,17 +207,17 @@ impl MergerNode {
     /// (a late cloud of an earlier scan), is refused and the camera's grid so far stays.
     fn check_cloud(&self, i: usize, c: &PointCloud2) -> Result<Grid, NodeError> {
         let at = convert::fmt_stamp(c.header.stamp.nanos());
-        let grid = convert::cloud_grid(c).map_err(|e| NodeError::new(format!("cloud at {at}: {e}")))?;
+        let grid = convert::cloud_grid(c).map_err(|e| NodeError::malformed(format!("cloud at {at}: {e}")))?;
         if let Some(&(w, h)) = self.camera_sizes.get(&i) {
             if c.height != w && c.height != h {
-                return Err(NodeError::new(format!(
+                return Err(NodeError::contradicts(format!(
                     "cloud at {at} has {} samples per frame; the camera's {w}x{h} images (camera_info) give {h} (vertical lines) or {w} (horizontal)",
                     c.height
                 )));
             }
         }
         if let Some(start) = self.scan_start_ns.filter(|&s| c.header.stamp.nanos() < s) {
-            return Err(NodeError::new(format!(
+            return Err(NodeError::contradicts(format!(
                 "cloud at {at} is older than scan {}'s START at {}: a late cloud of an earlier scan",
                 self.scan_id,
                 convert::fmt_stamp(start)
@@ -218,7 +226,7 @@ impl MergerNode {
         Ok(grid)
     }
 
-    fn merge(&mut self, out: &mut Outbox) {
+    fn merge(&mut self, out: &mut Out) {
         self.pending_deadline = None;
         if self.clouds.is_empty() {
             return;
@@ -236,7 +244,7 @@ impl MergerNode {
                     .map(|(name, e)| convert::transform_stamped(stamp, &self.cfg.carm_frame, &format!("{name}_optical_frame"), e))
                     .collect(),
             };
-            out.publish(OUT_PLACEMENTS, Msg::Tf(Arc::new(placements)));
+            out.publish(Output::Placements, Msg::Tf(Arc::new(placements)));
             self.save_rig(&refined);
         }
         let Merged { surface: merged, meshes, fused_dropped, seam_triangles } =
@@ -260,9 +268,9 @@ impl MergerNode {
             self.scan_id as i32,
             1.0 - self.cfg.transparency,
         )));
-        out.publish(OUT_CLOUD, cloud.clone());
-        out.publish(OUT_MESH, marker.clone());
-        self.last_outputs.set(vec![(OUT_CLOUD, cloud), (OUT_MESH, marker)]);
+        out.publish(Output::Cloud, cloud.clone());
+        out.publish(Output::Mesh, marker.clone());
+        self.last_outputs.set(vec![(Output::Cloud, cloud), (Output::Mesh, marker)]);
         self.write(self.scan_id, &merged, &meshes, &refinement, Some(&scan_report));
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
@@ -467,7 +475,7 @@ impl MergerNode {
     fn overlay(&mut self, m: &Marker) -> Result<(), NodeError> {
         let plane = overlay_plane(m).map_err(|e| {
             self.bad_overlays += 1;
-            NodeError::new(format!("/xray/overlay: {e}"))
+            NodeError::malformed(format!("/xray/overlay: {e}"))
         })?;
         let scan_id = m.id.max(0) as u32;
         self.overlays.insert(scan_id, plane);
@@ -545,15 +553,23 @@ fn write_files(
     Ok(())
 }
 
-/// The merger's outputs, in the order `outputs()` lists them.
-const OUT_CLOUD: usize = 0;
-const OUT_MESH: usize = 1;
-const OUT_PLACEMENTS: usize = 2;
+/// The merger's outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// `/surface/cloud`: the merged cloud.
+    Cloud,
+    /// `/surface/mesh`: the merged surface.
+    Mesh,
+    /// `/surface/placements`: the cameras' placements as refined.
+    Placements,
+}
+
+type Out = Outbox<Input, Output>;
 
 /// The merger's inputs, in the order `inputs()` lists them: a cloud per camera, the scan
 /// events, the radiograph overlay, `/tf`, `/tf_static`, a camera_info per camera, the reports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Input {
+pub enum Input {
     /// `/<camera>/cloud` of camera `k` of `cameras`.
     Cloud(usize),
     /// `/scan/events`.
@@ -596,17 +612,19 @@ impl MergerNode {
 }
 
 impl Component for MergerNode {
+    type Input = Input;
+    type Output = Output;
     fn node_name(&self) -> &'static str {
         "merger"
     }
-    fn inputs(&self) -> Vec<Port> {
-        self.input_list().into_iter().map(|i| self.input_port(i)).collect()
+    fn inputs(&self) -> Vec<(Input, Port)> {
+        self.input_list().into_iter().map(|i| (i, self.input_port(i))).collect()
     }
-    fn outputs(&self) -> Vec<Port> {
+    fn outputs(&self) -> Vec<(Output, Port)> {
         vec![
-            Port::new("/surface/cloud", PointCloud2::TYPE_NAME, QosClass::State),
-            Port::new("/surface/mesh", Marker::TYPE_NAME, QosClass::State),
-            Port::new("/surface/placements", TFMessage::TYPE_NAME, QosClass::Reliable),
+            (Output::Cloud, Port::new("/surface/cloud", PointCloud2::TYPE_NAME, QosClass::State)),
+            (Output::Mesh, Port::new("/surface/mesh", Marker::TYPE_NAME, QosClass::State)),
+            (Output::Placements, Port::new("/surface/placements", TFMessage::TYPE_NAME, QosClass::Reliable)),
         ]
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
@@ -620,11 +638,8 @@ impl Component for MergerNode {
         self.cfg = c;
         Ok(())
     }
-    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
-        let Some(&port) = self.input_list().get(input) else {
-            return Err(NodeError::new(format!("no input {input}")));
-        };
-        match (port, msg) {
+    fn handle(&mut self, input: Input, msg: &Msg, out: &mut Out) -> Result<(), NodeError> {
+        match (input, msg) {
             (Input::Cloud(i), Msg::Cloud(c)) => {
                 let grid = self.check_cloud(i, c).inspect_err(|_| self.bad_clouds += 1)?;
                 self.clouds.insert(i, (c.header.stamp.nanos(), grid));
@@ -632,7 +647,7 @@ impl Component for MergerNode {
                 Ok(())
             }
             (Input::Report, Msg::Text(t)) => {
-                let r = Report::parse(&t.data).map_err(|e| NodeError::new(format!("/scan/report: {e}")))?;
+                let r = Report::parse(&t.data).map_err(|e| NodeError::malformed(format!("/scan/report: {e}")))?;
                 let scan = r.scan_id();
                 self.keep_report(r);
                 // A report of a scan already merged: its account is written again, whole.
@@ -646,7 +661,7 @@ impl Component for MergerNode {
             (Input::CameraInfo(i), Msg::CameraInfo(info)) => {
                 let (w, h) = (info.width, info.height);
                 if !xsurf_core::limits::image_side_ok(w) || !xsurf_core::limits::image_side_ok(h) {
-                    return Err(NodeError::new(format!(
+                    return Err(NodeError::malformed(format!(
                         "camera_info size {w}x{h} is outside {} pixels a side",
                         xsurf_core::limits::image_side_text()
                     )));
@@ -684,22 +699,22 @@ impl Component for MergerNode {
                     t.header.frame_id.trim_start_matches('/') == self.cfg.table_frame
                         && t.child_frame_id.trim_start_matches('/') == self.cfg.carm_frame
                 }) {
-                    let pose = convert::rigid(t).map_err(NodeError::new)?;
+                    let pose = convert::rigid(t).map_err(NodeError::malformed)?;
                     self.motion = Some(self.motion.map_or(CarmMotion::start(pose), |m| m.then(pose)));
                 }
                 Ok(())
             }
-            (Input::TfStatic, Msg::Tf(t)) => self.statics.add_static(t).map_err(NodeError::new),
-            (port, m) => Err(NodeError::new(format!("unexpected {} on {port:?}", m.type_name()))),
+            (Input::TfStatic, Msg::Tf(t)) => self.statics.add_static(t).map_err(NodeError::malformed),
+            (port, m) => Err(NodeError::unexpected(port, m)),
         }
     }
-    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+    fn tick(&mut self, now_ns: i64, out: &mut Out) {
         if self.pending_deadline.is_some_and(|d| now_ns >= d) {
             self.merge(out);
         }
         self.last_outputs.tick(self.cfg.republish_ns, now_ns, out);
     }
-    fn finish(&mut self, out: &mut Outbox) {
+    fn finish(&mut self, out: &mut Out) {
         if !self.merged_current {
             self.merge(out);
         }
@@ -741,12 +756,12 @@ mod tests {
         let mut m = MergerNode::new(&params).unwrap();
         let steps = 200;
         let total = 358.45f64.to_radians();
-        let mut out = Outbox::default();
+        let mut out = Out::default();
         for k in 0..=steps {
             let pose =
                 Iso3::from_parts(Vec3::ZERO, Quat::from_axis_angle(Vec3::Z, total * f64::from(k) / f64::from(steps)));
             let tf = TFMessage { transforms: vec![convert::transform_stamped(i64::from(k), "table", "carm", &pose)] };
-            m.handle(m.cfg.cameras.len() + 2, &Msg::Tf(Arc::new(tf)), &mut out).unwrap();
+            m.handle(Input::Tf, &Msg::Tf(Arc::new(tf)), &mut out).unwrap();
         }
         let names = vec!["cam1".to_string(), "cam2".to_string()];
         let (refined, records) = m.refine(&names, &mut [Grid::new(1), Grid::new(1)]);
@@ -762,8 +777,7 @@ mod tests {
         use xsurf_core::triangulate::Profile;
         let params = Params::resolve(&MergerParams::declarations(), &Default::default()).unwrap();
         let mut m = MergerNode::new(&params).unwrap();
-        let mut out = Outbox::default();
-        let n = m.cfg.cameras.len();
+        let mut out = Out::default();
         let cloud = |samples: usize, frames: usize, sec: i32| {
             let mut g = Grid::new(samples);
             for f in 0..frames {
@@ -782,22 +796,22 @@ mod tests {
         };
         let mut start = ScanEvent { scan_id: 4, event: ScanEvent::START, ..Default::default() };
         start.header.stamp.sec = 10;
-        m.handle(n, &Msg::ScanEvent(Arc::new(start)), &mut out).unwrap();
+        m.handle(Input::Events, &Msg::ScanEvent(Arc::new(start)), &mut out).unwrap();
         let info = CameraInfo { width: 64, height: 40, ..Default::default() };
-        m.handle(n + 4, &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
-        m.handle(0, &cloud(40, 5, 11), &mut out).unwrap();
-        m.handle(0, &cloud(64, 6, 12), &mut out).unwrap(); // horizontal lines: one per column
-        let e = m.handle(0, &cloud(10, 7, 13), &mut out).unwrap_err().to_string();
+        m.handle(Input::CameraInfo(0), &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
+        m.handle(Input::Cloud(0), &cloud(40, 5, 11), &mut out).unwrap();
+        m.handle(Input::Cloud(0), &cloud(64, 6, 12), &mut out).unwrap(); // horizontal lines: one per column
+        let e = m.handle(Input::Cloud(0), &cloud(10, 7, 13), &mut out).unwrap_err().to_string();
         assert!(e.contains("has 10 samples per frame; the camera's 64x40 images"), "{e}");
-        let e = m.handle(0, &cloud(64, 8, 9), &mut out).unwrap_err().to_string();
+        let e = m.handle(Input::Cloud(0), &cloud(64, 8, 9), &mut out).unwrap_err().to_string();
         assert!(e.contains("older than scan 4's START at 10.000000000"), "{e}");
         assert_eq!(m.bad_clouds, 2);
         let (stamp, grid) = &m.clouds[&0];
         assert_eq!((*stamp, grid.samples(), grid.frames()), (12_000_000_000, 64, 6), "the last good cloud stays");
         // Camera 2 has no camera_info yet: its cloud is taken as it is.
-        m.handle(1, &cloud(10, 3, 11), &mut out).unwrap();
+        m.handle(Input::Cloud(1), &cloud(10, 3, 11), &mut out).unwrap();
         let bad = CameraInfo { width: 64, height: 0, ..Default::default() };
-        assert!(m.handle(n + 5, &Msg::CameraInfo(Arc::new(bad)), &mut out).is_err());
+        assert!(m.handle(Input::CameraInfo(1), &Msg::CameraInfo(Arc::new(bad)), &mut out).is_err());
     }
 
     /// A camera's grid of `frames` frames of `samples` points on a flat patch at height
@@ -833,7 +847,7 @@ mod tests {
         o.insert("refine".to_string(), xsurf_runtime::params::ParamValue::Bool(false));
         o.insert("output_dir".to_string(), xsurf_runtime::params::ParamValue::String(dir.to_string_lossy().into()));
         let params = Params::resolve(&MergerParams::declarations(), &o).unwrap();
-        let mut h = Harness::new(Box::new(MergerNode::new(&params).unwrap()), "merger", "/");
+        let mut h = Harness::new(boxed(MergerNode::new(&params).unwrap()), "merger", "/");
         let event = |event, sec| {
             let mut e = ScanEvent { scan_id: 5, event, ..Default::default() };
             e.header.stamp.sec = sec;
@@ -888,7 +902,7 @@ mod tests {
             let mut o = BTreeMap::new();
             o.insert("refine".to_string(), xsurf_runtime::params::ParamValue::Bool(false));
             let params = Params::resolve(&MergerParams::declarations(), &o).unwrap();
-            let mut h = Harness::new(Box::new(MergerNode::new(&params).unwrap()), "merger", "/");
+            let mut h = Harness::new(boxed(MergerNode::new(&params).unwrap()), "merger", "/");
             h.feed("/scan/events", &event(ScanEvent::START, 10))
                 .feed("/cam1/cloud", &cloud(0.0, 11))
                 .feed("/cam2/cloud", &cloud(dz, 11))

@@ -12,7 +12,7 @@ pub use params::*;
 
 /// The node type, as the registry lists it.
 pub const NODE: crate::registry::NodeType =
-    crate::registry::NodeType::of::<MesherParams>("mesher", crate::registry::Role::PerCamera, 50, |p| Ok(Box::new(MesherNode::new(p)?)));
+    crate::registry::NodeType::of::<MesherParams>("mesher", crate::registry::Role::PerCamera, 50, |p| Ok(boxed(MesherNode::new(p)?)));
 
 use crate::convert;
 use crate::scan_report::{Gap, MesherReport};
@@ -26,7 +26,7 @@ use xsurf_msgs::std_msgs::StringMsg;
 use xsurf_msgs::visualization_msgs::Marker;
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
-use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::component::{boxed, Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 struct Config {
@@ -184,7 +184,7 @@ pub struct MesherNode {
     gaps: GapDetector,
     last_cloud_ns: i64,
     /// The last scan's mesh marker, published again between scans.
-    last_mesh: crate::republish::Republisher,
+    last_mesh: crate::republish::Republisher<Output>,
     scans: u64,
     frames: u64,
     dropped_frames: u64,
@@ -206,16 +206,45 @@ pub struct MesherNode {
 /// Profiles kept between scans for a START event that arrives after them.
 const EARLY_FRAMES: usize = 8;
 
-const IN_PROFILE: usize = 0;
-const IN_EVENTS: usize = 1;
-const IN_INFO: usize = 2;
-const OUT_CLOUD: usize = 0;
-const OUT_MESH: usize = 1;
-const OUT_REPORT: usize = 2;
+/// The mesher's inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Input {
+    /// `profile`: the camera's profiles, one per frame.
+    Profile,
+    /// `/scan/events`: the scans.
+    Events,
+    /// `camera_info`: the samples per frame of the grid.
+    CameraInfo,
+}
+
+/// The mesher's outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// `cloud`: the scan's organized grid, growing while it runs.
+    Cloud,
+    /// `mesh`: the scan's mesh, at its end.
+    Mesh,
+    /// `/scan/report`: this camera's account of each scan.
+    Report,
+}
+
+type Out = Outbox<Input, Output>;
 /// Longest run of empty columns inserted for a stamp gap.
 const MAX_GAP_COLUMNS: u32 = 300;
 
 impl MesherNode {
+    /// Triangles of the scans' meshes, so far.
+    pub fn triangles(&self) -> u64 {
+        self.triangles
+    }
+    /// Points of the scans' meshes, so far.
+    pub fn mesh_points(&self) -> u64 {
+        self.mesh_points
+    }
+    /// Frames missing from the stamps, so far.
+    pub fn dropped_frames(&self) -> u64 {
+        self.dropped_frames
+    }
     /// Builds the node from its parameters.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
         let cfg = config(p)?;
@@ -259,7 +288,7 @@ impl MesherNode {
         if let Some(n) = self.samples.filter(|&n| n != p.points.len()) {
             self.bad_profiles += 1;
             self.account.refused += 1;
-            return Err(NodeError::new(format!(
+            return Err(NodeError::contradicts(format!(
                 "profile has {} samples; the camera (camera_info, {} line) gives {n}",
                 p.points.len(),
                 self.cfg.orientation.name()
@@ -286,7 +315,7 @@ impl MesherNode {
             }
         }
         self.grid.push(stamp, p).map_err(|n| {
-            NodeError::new(format!("profile has {n} samples, this scan's grid has {}", self.grid.samples()))
+            NodeError::contradicts(format!("profile has {n} samples, this scan's grid has {}", self.grid.samples()))
         })?;
         self.frames += 1;
         let a = &mut self.account;
@@ -298,13 +327,13 @@ impl MesherNode {
     }
 
     /// Closes the scan whose END or ABORT has been seen, if any.
-    fn close_pending(&mut self, out: &mut Outbox) {
+    fn close_pending(&mut self, out: &mut Out) {
         if let Some((aborted, end)) = self.closing.take() {
             self.close(aborted, Some(end), out);
         }
     }
 
-    fn close(&mut self, aborted: bool, end_ns: Option<i64>, out: &mut Outbox) {
+    fn close(&mut self, aborted: bool, end_ns: Option<i64>, out: &mut Out) {
         self.closing = None;
         if !self.active {
             return;
@@ -314,7 +343,7 @@ impl MesherNode {
         self.account.points_rejected = cleaned.rejected as u64;
         self.points_rejected += cleaned.rejected as u64;
         let report = self.account.report(self.scan_id, &self.camera, aborted, end_ns, self.gaps.nominal_ns());
-        out.publish(OUT_REPORT, Msg::Text(Arc::new(StringMsg { data: report })));
+        out.publish(Output::Report, Msg::Text(Arc::new(StringMsg { data: report })));
         self.active = false;
         self.scans += 1;
         let stamp = self.grid.stamps_ns().last().copied().unwrap_or(0);
@@ -322,10 +351,10 @@ impl MesherNode {
         self.triangles += mesh.triangles.len() as u64;
         self.mesh_points += mesh.positions.len() as u64;
         let header = convert::header(stamp, &self.cfg.frame_id);
-        out.publish(OUT_CLOUD, Msg::Cloud(Arc::new(convert::grid_cloud(&grid, header.clone()))));
+        out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud(&grid, header.clone()))));
         let marker = Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header, &self.camera, self.scan_id as i32, 1.0)));
-        out.publish(OUT_MESH, marker.clone());
-        self.last_mesh.set(vec![(OUT_MESH, marker)]);
+        out.publish(Output::Mesh, marker.clone());
+        self.last_mesh.set(vec![(Output::Mesh, marker)]);
         if grid.valid() == 0 {
             log::warn!("{}: scan {} has no points; nothing written", self.camera, self.scan_id);
             return;
@@ -356,8 +385,8 @@ impl MesherNode {
 
 impl MesherNode {
     /// A profile: into the scan's grid if it was exposed in the scan; the growing cloud at its rate.
-    fn profile(&mut self, c: &PointCloud2, out: &mut Outbox) -> Result<(), NodeError> {
-        let p = convert::cloud_profile(c).map_err(|e| NodeError::new(format!("profile: {e}")))?;
+    fn profile(&mut self, c: &PointCloud2, out: &mut Out) -> Result<(), NodeError> {
+        let p = convert::cloud_profile(c).map_err(|e| NodeError::malformed(format!("profile: {e}")))?;
         if !self.active {
             // Outside a scan bounded by events, frames belong to no scan; the last few
             // are kept, since a frame stamped after START may arrive before the START
@@ -395,14 +424,14 @@ impl MesherNode {
             if stamp.saturating_sub(self.last_cloud_ns) >= period {
                 self.last_cloud_ns = stamp;
                 let h = convert::header(stamp, &self.cfg.frame_id);
-                out.publish(OUT_CLOUD, Msg::Cloud(Arc::new(convert::grid_cloud(&self.grid, h))));
+                out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud(&self.grid, h))));
             }
         }
         Ok(())
     }
 
     /// START, END or ABORT of a scan.
-    fn event(&mut self, e: &ScanEvent, out: &mut Outbox) -> Result<(), NodeError> {
+    fn event(&mut self, e: &ScanEvent, out: &mut Out) -> Result<(), NodeError> {
         self.events_seen = true;
         match e.event {
             ScanEvent::START => {
@@ -427,7 +456,7 @@ impl MesherNode {
                 }
             }
             ScanEvent::END | ScanEvent::ABORT => {}
-            other => return Err(NodeError::new(format!("unknown scan event {other}"))),
+            other => return Err(NodeError::malformed(format!("unknown scan event {other}"))),
         }
         Ok(())
     }
@@ -439,7 +468,7 @@ impl MesherNode {
             Orientation::Horizontal => i.width,
         };
         if !xsurf_core::limits::image_side_ok(i.width) || !xsurf_core::limits::image_side_ok(i.height) {
-            return Err(NodeError::new(format!(
+            return Err(NodeError::malformed(format!(
                 "camera_info size {}x{} is outside {} pixels a side",
                 i.width,
                 i.height,
@@ -452,6 +481,8 @@ impl MesherNode {
 }
 
 impl Component for MesherNode {
+    type Input = Input;
+    type Output = Output;
     fn node_name(&self) -> &'static str {
         "mesher"
     }
@@ -460,18 +491,18 @@ impl Component for MesherNode {
             self.camera = namespace.trim_matches('/').rsplit('/').next().unwrap_or("").to_string();
         }
     }
-    fn inputs(&self) -> Vec<Port> {
+    fn inputs(&self) -> Vec<(Input, Port)> {
         vec![
-            Port::new("profile", PointCloud2::TYPE_NAME, QosClass::Reliable),
-            Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
-            Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
+            (Input::Profile, Port::new("profile", PointCloud2::TYPE_NAME, QosClass::Reliable)),
+            (Input::Events, Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable)),
+            (Input::CameraInfo, Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor)),
         ]
     }
-    fn outputs(&self) -> Vec<Port> {
+    fn outputs(&self) -> Vec<(Output, Port)> {
         vec![
-            Port::new("cloud", PointCloud2::TYPE_NAME, QosClass::State),
-            Port::new("mesh", Marker::TYPE_NAME, QosClass::State),
-            Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
+            (Output::Cloud, Port::new("cloud", PointCloud2::TYPE_NAME, QosClass::State)),
+            (Output::Mesh, Port::new("mesh", Marker::TYPE_NAME, QosClass::State)),
+            (Output::Report, Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable)),
         ]
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
@@ -481,21 +512,21 @@ impl Component for MesherNode {
         }
         Ok(())
     }
-    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+    fn handle(&mut self, input: Input, msg: &Msg, out: &mut Out) -> Result<(), NodeError> {
         match (input, msg) {
-            (IN_PROFILE, Msg::Cloud(c)) => self.profile(c, out),
-            (IN_EVENTS, Msg::ScanEvent(e)) => self.event(e, out),
-            (IN_INFO, Msg::CameraInfo(i)) => self.camera_info(i),
-            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+            (Input::Profile, Msg::Cloud(c)) => self.profile(c, out),
+            (Input::Events, Msg::ScanEvent(e)) => self.event(e, out),
+            (Input::CameraInfo, Msg::CameraInfo(i)) => self.camera_info(i),
+            (i, m) => Err(NodeError::unexpected(i, m)),
         }
     }
-    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+    fn tick(&mut self, now_ns: i64, out: &mut Out) {
         if self.closing.is_some_and(|(_, end)| now_ns >= end.saturating_add(self.cfg.end_grace_ns)) {
             self.close_pending(out);
         }
         self.last_mesh.tick(self.cfg.republish_ns, now_ns, out);
     }
-    fn finish(&mut self, out: &mut Outbox) {
+    fn finish(&mut self, out: &mut Out) {
         self.outside_scan += self.early.len() as u64;
         self.early.clear();
         self.close_pending(out);
@@ -538,13 +569,13 @@ mod tests {
         assert_eq!(missing, 2);
     }
     /// A mesher with its defaults that has the camera_info of a 64x40 camera.
-    fn mesher_of_a_64x40_camera() -> (MesherNode, Outbox) {
+    fn mesher_of_a_64x40_camera() -> (MesherNode, Out) {
         #![allow(clippy::unwrap_used)]
         let params = Params::resolve(&MesherParams::declarations(), &Default::default()).unwrap();
         let mut m = MesherNode::new(&params).unwrap();
-        let mut out = Outbox::default();
+        let mut out = Out::default();
         let info = CameraInfo { width: 64, height: 40, ..Default::default() };
-        m.handle(IN_INFO, &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
+        m.handle(Input::CameraInfo, &Msg::CameraInfo(Arc::new(info)), &mut out).unwrap();
         (m, out)
     }
 
@@ -566,26 +597,26 @@ mod tests {
             h.stamp.sec = sec;
             Msg::Cloud(Arc::new(convert::profile_cloud(&p, h)))
         };
-        let e = m.handle(IN_PROFILE, &profile(10, 1), &mut out).unwrap_err();
+        let e = m.handle(Input::Profile, &profile(10, 1), &mut out).unwrap_err();
         assert!(
             e.to_string().contains("profile has 10 samples; the camera (camera_info, vertical line) gives 40"),
             "{e}"
         );
         for sec in 2..6 {
-            m.handle(IN_PROFILE, &profile(40, sec), &mut out).unwrap();
+            m.handle(Input::Profile, &profile(40, sec), &mut out).unwrap();
         }
         assert_eq!((m.frames, m.bad_profiles, m.grid.samples()), (4, 1, 40));
         // A camera_info that no camera has is refused by name.
         let bad = CameraInfo { width: 0, height: 0, ..Default::default() };
-        assert!(m.handle(IN_INFO, &Msg::CameraInfo(Arc::new(bad)), &mut out).unwrap_err().to_string().contains("0x0"));
+        assert!(m.handle(Input::CameraInfo, &Msg::CameraInfo(Arc::new(bad)), &mut out).unwrap_err().to_string().contains("0x0"));
         // A scan from START at 10 s: a frame exposed at 9 s that arrives after START is not
         // part of it (nor the reason for a cloud stamped before START); the 11 s one is.
         let mut start = ScanEvent { scan_id: 3, event: ScanEvent::START, ..Default::default() };
         start.header.stamp.sec = 10;
-        m.handle(IN_EVENTS, &Msg::ScanEvent(Arc::new(start)), &mut out).unwrap();
+        m.handle(Input::Events, &Msg::ScanEvent(Arc::new(start)), &mut out).unwrap();
         let outside = m.outside_scan;
-        m.handle(IN_PROFILE, &profile(40, 9), &mut out).unwrap();
-        m.handle(IN_PROFILE, &profile(40, 11), &mut out).unwrap();
+        m.handle(Input::Profile, &profile(40, 9), &mut out).unwrap();
+        m.handle(Input::Profile, &profile(40, 11), &mut out).unwrap();
         assert_eq!((m.outside_scan - outside, m.grid.frames(), m.account.first_ns), (1, 1, Some(11_000_000_000)));
     }
 
@@ -600,7 +631,7 @@ mod tests {
             e.header.stamp.sec = sec;
             Msg::ScanEvent(Arc::new(e))
         };
-        m.handle(IN_EVENTS, &event(ScanEvent::START, 1), &mut out).unwrap();
+        m.handle(Input::Events, &event(ScanEvent::START, 1), &mut out).unwrap();
         for f in 0..20 {
             // A plane, 1 mm between samples and 2 mm between frames; frame 10 has a wrong
             // peak 8 mm above it at sample 5.
@@ -610,15 +641,15 @@ mod tests {
             let p = Profile { points, intensity: vec![50.0; 40], rgb: None, range: vec![0.5; 40], outside_volume: 0 };
             let mut h = xsurf_msgs::std_msgs::Header::default();
             (h.stamp.sec, h.stamp.nanosec) = (2, f * 10_000_000);
-            m.handle(IN_PROFILE, &Msg::Cloud(Arc::new(convert::profile_cloud(&p, h))), &mut out).unwrap();
+            m.handle(Input::Profile, &Msg::Cloud(Arc::new(convert::profile_cloud(&p, h))), &mut out).unwrap();
         }
-        m.handle(IN_EVENTS, &event(ScanEvent::END, 3), &mut out).unwrap();
+        m.handle(Input::Events, &event(ScanEvent::END, 3), &mut out).unwrap();
         m.finish(&mut out);
         let report = out
             .items
             .iter()
             .find_map(|(port, msg)| match msg {
-                Msg::Text(t) if *port == OUT_REPORT => {
+                Msg::Text(t) if *port == Output::Report => {
                     Some(serde_json::from_str::<serde_json::Value>(&t.data).unwrap())
                 }
                 _ => None,
@@ -631,7 +662,7 @@ mod tests {
             .iter()
             .rev()
             .find_map(|(port, msg)| match msg {
-                Msg::Cloud(c) if *port == OUT_CLOUD => Some(convert::cloud_grid(c).unwrap()),
+                Msg::Cloud(c) if *port == Output::Cloud => Some(convert::cloud_grid(c).unwrap()),
                 _ => None,
             })
             .unwrap();

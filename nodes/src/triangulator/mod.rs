@@ -8,7 +8,7 @@ pub use params::*;
 
 /// The node type, as the registry lists it.
 pub const NODE: crate::registry::NodeType =
-    crate::registry::NodeType::of::<TriangulatorParams>("triangulator", crate::registry::Role::PerCamera, 50, |p| Ok(Box::new(TriangulatorNode::new(p)?)));
+    crate::registry::NodeType::of::<TriangulatorParams>("triangulator", crate::registry::Role::PerCamera, 50, |p| Ok(boxed(TriangulatorNode::new(p)?)));
 
 use crate::convert;
 use crate::tf::TfBuffer;
@@ -22,7 +22,7 @@ use xsurf_msgs::std_msgs::StringMsg;
 use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::xsurf_msgs::{LaserLine, ScanEvent};
 use xsurf_msgs::RosMessage;
-use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::component::{boxed, Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 /// The plane `[nx, ny, nz, d]` of the parameter `name`: four values, a normal that is not zero.
@@ -98,14 +98,38 @@ pub struct TriangulatorNode {
 /// by more than this is placed by no pose (and counted), and the memory stays flat however long
 /// the node runs.
 const TF_CACHE_NS: i64 = 10_000_000_000;
-const IN_LINE: usize = 0;
-const IN_INFO: usize = 1;
-const IN_TF: usize = 2;
-const IN_TF_STATIC: usize = 3;
-const IN_EVENTS: usize = 4;
-const OUT_REPORT: usize = 1;
+
+/// The triangulator's inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Input {
+    /// `laser_line`: the camera's lines.
+    Line,
+    /// `camera_info`: the camera's model.
+    CameraInfo,
+    /// `/tf`: the C-arm's pose.
+    Tf,
+    /// `/tf_static`: where the camera sits on the C-arm.
+    TfStatic,
+    /// `/scan/events`: the scans.
+    Events,
+}
+
+/// The triangulator's outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// `profile`: one per line placed.
+    Profile,
+    /// `/scan/report`: this camera's account of each scan.
+    Report,
+}
+
+type Out = Outbox<Input, Output>;
 
 impl TriangulatorNode {
+    /// Points triangulated, so far.
+    pub fn points(&self) -> u64 {
+        self.points
+    }
     /// Builds the node from its parameters.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
         let cfg = config(p)?;
@@ -129,20 +153,20 @@ impl TriangulatorNode {
 
     /// Makes sure the triangulator for `frame` is built.
     fn ensure_triangulator(&mut self, frame: &str) -> Result<(), NodeError> {
-        let (model, info_frame) = self.model.clone().ok_or_else(|| NodeError::new("no camera_info received yet"))?;
+        let (model, info_frame) = self.model.clone().ok_or_else(|| NodeError::not_ready("no camera_info received yet"))?;
         let rebuild = match &self.tri {
             Some((_, f, m)) => f != frame || *m != model,
             None => true,
         };
         if rebuild {
             let carm_from_optical = self.tf.carm_from(frame).ok_or_else(|| {
-                NodeError::new(format!(
+                NodeError::not_ready(format!(
                     "no tf from {} to {frame} on /tf_static (camera_info frame {info_frame})",
                     self.cfg.carm_frame
                 ))
             })?;
             let t = Triangulator::new(CameraGeometry { model, carm_from_optical }, &self.cfg.tri)
-                .map_err(NodeError::new)?;
+                .map_err(NodeError::failed)?;
             self.tri = Some((t, frame.to_string(), model));
         }
         Ok(())
@@ -153,13 +177,13 @@ impl TriangulatorNode {
     fn place(&mut self, line: &LaserLine, stamp: i64, ahead: i64) -> Result<xsurf_core::geom::Iso3, NodeError> {
         if let Some((m, _)) = &self.model {
             if (m.width, m.height) != (line.image_width, line.image_height) {
-                return Err(NodeError::new(format!(
+                return Err(NodeError::contradicts(format!(
                     "the line is of a {}x{} image, camera_info says {}x{}",
                     line.image_width, line.image_height, m.width, m.height
                 )));
             }
         }
-        let pose = self.tf.predict_table_from_carm(stamp, ahead).map_err(|e| NodeError::new(e.to_string()))?;
+        let pose = self.tf.predict_table_from_carm(stamp, ahead).map_err(NodeError::not_ready)?;
         self.ensure_triangulator(line.header.frame_id.trim_start_matches('/'))?;
         Ok(pose)
     }
@@ -168,7 +192,7 @@ impl TriangulatorNode {
     /// them even if not. A line that cannot be placed is refused as itself (on `laser_line`,
     /// whatever message triggered the placing), and the others go on: one bad line costs only
     /// itself.
-    fn drain(&mut self, out: &mut Outbox, force: bool) {
+    fn drain(&mut self, out: &mut Out, force: bool) {
         while let Some((line, core)) = self.pending.front().cloned() {
             let stamp = line.header.stamp.nanos();
             let ahead = self.cfg.max_extrapolation_ns;
@@ -182,9 +206,9 @@ impl TriangulatorNode {
                 Ok(p) => p,
                 Err(e) => {
                     self.unplaced += 1;
-                    let e = NodeError::new(format!("line at {}: {e}", convert::fmt_stamp(stamp)));
+                    let e = e.context(format!("line at {}", convert::fmt_stamp(stamp)));
                     self.tally.refuse(stamp, "line", &e.to_string());
-                    out.refuse(IN_LINE, e);
+                    out.refuse(Input::Line, e);
                     continue;
                 }
             };
@@ -195,32 +219,34 @@ impl TriangulatorNode {
             self.outside_volume += u64::from(self.profile.outside_volume);
             let cloud: PointCloud2 =
                 convert::profile_cloud(&self.profile, convert::header(stamp, &self.cfg.table_frame));
-            out.publish(0, Msg::Cloud(Arc::new(cloud)));
+            out.publish(Output::Profile, Msg::Cloud(Arc::new(cloud)));
             self.tally.count(stamp);
         }
     }
 }
 
 impl Component for TriangulatorNode {
+    type Input = Input;
+    type Output = Output;
     fn node_name(&self) -> &'static str {
         "triangulator"
     }
     fn set_identity(&mut self, _name: &str, namespace: &str) {
         self.camera = namespace.trim_matches('/').rsplit('/').next().unwrap_or("").to_string();
     }
-    fn inputs(&self) -> Vec<Port> {
+    fn inputs(&self) -> Vec<(Input, Port)> {
         vec![
-            Port::new("laser_line", LaserLine::TYPE_NAME, QosClass::Reliable),
-            Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor),
-            Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable),
-            Port::new("/tf_static", TFMessage::TYPE_NAME, QosClass::Static),
-            Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
+            (Input::Line, Port::new("laser_line", LaserLine::TYPE_NAME, QosClass::Reliable)),
+            (Input::CameraInfo, Port::new("camera_info", CameraInfo::TYPE_NAME, QosClass::Sensor)),
+            (Input::Tf, Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable)),
+            (Input::TfStatic, Port::new("/tf_static", TFMessage::TYPE_NAME, QosClass::Static)),
+            (Input::Events, Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable)),
         ]
     }
-    fn outputs(&self) -> Vec<Port> {
+    fn outputs(&self) -> Vec<(Output, Port)> {
         vec![
-            Port::new("profile", PointCloud2::TYPE_NAME, QosClass::Reliable),
-            Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable),
+            (Output::Profile, Port::new("profile", PointCloud2::TYPE_NAME, QosClass::Reliable)),
+            (Output::Report, Port::new("/scan/report", StringMsg::TYPE_NAME, QosClass::Reliable)),
         ]
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
@@ -228,13 +254,13 @@ impl Component for TriangulatorNode {
         self.tri = None;
         Ok(())
     }
-    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+    fn handle(&mut self, input: Input, msg: &Msg, out: &mut Out) -> Result<(), NodeError> {
         match (input, msg) {
-            (IN_LINE, Msg::LaserLine(l)) => {
+            (Input::Line, Msg::LaserLine(l)) => {
                 self.lines += 1;
                 // Checked on arrival, so that a malformed line is refused as itself.
                 let core = convert::core_line(l).map_err(|e| {
-                    let e = NodeError::new(e);
+                    let e = NodeError::malformed(e);
                     self.tally.refuse(l.header.stamp.nanos(), "line", &e.to_string());
                     e
                 })?;
@@ -242,48 +268,48 @@ impl Component for TriangulatorNode {
                 self.drain(out, false);
                 Ok(())
             }
-            (IN_INFO, Msg::CameraInfo(i)) => {
-                let m = convert::camera_model(i).map_err(|e| NodeError::new(format!("camera_info: {e}")))?;
+            (Input::CameraInfo, Msg::CameraInfo(i)) => {
+                let m = convert::camera_model(i).map_err(|e| NodeError::malformed(format!("camera_info: {e}")))?;
                 self.model = Some((m, i.header.frame_id.clone()));
                 self.drain(out, false);
                 Ok(())
             }
-            (IN_TF, Msg::Tf(t)) => {
+            (Input::Tf, Msg::Tf(t)) => {
                 let added = self.tf.add_dynamic(t);
                 if let Some(latest) = self.tf.latest_pose_stamp() {
                     self.tf.forget_before(latest.saturating_sub(TF_CACHE_NS));
                 }
                 self.drain(out, false);
-                added.map_err(NodeError::new)
+                added.map_err(NodeError::malformed)
             }
-            (IN_TF_STATIC, Msg::Tf(t)) => {
+            (Input::TfStatic, Msg::Tf(t)) => {
                 let added = self.tf.add_static(t);
                 self.tri = None;
-                added.map_err(NodeError::new)
+                added.map_err(NodeError::malformed)
             }
-            (IN_EVENTS, Msg::ScanEvent(e)) => {
+            (Input::Events, Msg::ScanEvent(e)) => {
                 // At the end of a scan the lines still waiting for a pose are placed now, so the
                 // mesher has them before it closes the scan.
                 if e.event != ScanEvent::START {
                     self.drain(out, true);
                 }
                 if let Some(report) = self.tally.event(e, crate::tally::Stage::Triangulator, &self.camera) {
-                    out.publish(OUT_REPORT, report);
+                    out.publish(Output::Report, report);
                 }
                 Ok(())
             }
-            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+            (i, m) => Err(NodeError::unexpected(i, m)),
         }
     }
-    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+    fn tick(&mut self, now_ns: i64, out: &mut Out) {
         if let Some(report) = self.tally.due(now_ns) {
-            out.publish(OUT_REPORT, report);
+            out.publish(Output::Report, report);
         }
     }
-    fn finish(&mut self, out: &mut Outbox) {
+    fn finish(&mut self, out: &mut Out) {
         self.drain(out, true);
         if let Some(report) = self.tally.report() {
-            out.publish(OUT_REPORT, report);
+            out.publish(Output::Report, report);
         }
     }
     fn counters(&self) -> Vec<(&'static str, u64)> {
@@ -326,7 +352,7 @@ mod tests {
     fn a_bad_line_is_refused_under_its_own_topic_and_costs_only_itself() {
         let params = Params::resolve(&TriangulatorParams::declarations(), &BTreeMap::new()).unwrap();
         let mut r = Router::new();
-        r.add(Box::new(TriangulatorNode::new(&params).unwrap()), "triangulator", "/cam1", &[]);
+        r.add(boxed(TriangulatorNode::new(&params).unwrap()), "triangulator", "/cam1", &[]);
         r.publish("/cam1/laser_line", &line(1, 40, 39));
         let n = &r.nodes()[0];
         assert_eq!(n.errors, 1);
@@ -406,7 +432,7 @@ mod tests {
         line.header = convert::header(t_image, "cam1_optical_frame");
 
         let params = Params::resolve(&TriangulatorParams::declarations(), &BTreeMap::new()).unwrap();
-        let mut h = Harness::new(Box::new(TriangulatorNode::new(&params).unwrap()), "triangulator", "/cam1");
+        let mut h = Harness::new(boxed(TriangulatorNode::new(&params).unwrap()), "triangulator", "/cam1");
         let info = convert::camera_info(&model, convert::header(t_image, "cam1_optical_frame"));
         let pose = |t, travel| {
             let e = xsurf_core::pose::table_from_carm(travel, 0.0, 0.0);

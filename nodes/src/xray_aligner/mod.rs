@@ -18,7 +18,7 @@ pub use params::*;
 
 /// The node type, as the registry lists it.
 pub const NODE: crate::registry::NodeType =
-    crate::registry::NodeType::of::<XrayAlignerParams>("xray_aligner", crate::registry::Role::Scanner, 50, |p| Ok(Box::new(XrayAlignerNode::new(p)?)));
+    crate::registry::NodeType::of::<XrayAlignerParams>("xray_aligner", crate::registry::Role::Scanner, 50, |p| Ok(boxed(XrayAlignerNode::new(p)?)));
 
 use crate::convert;
 use crate::tf::TfBuffer;
@@ -35,7 +35,7 @@ use xsurf_msgs::tf2_msgs::TFMessage;
 use xsurf_msgs::visualization_msgs::{Marker, UVCoordinate};
 use xsurf_msgs::xsurf_msgs::ScanEvent;
 use xsurf_msgs::RosMessage;
-use xsurf_runtime::component::{Component, Msg, NodeError, Outbox, Port, QosClass};
+use xsurf_runtime::component::{boxed, Component, Msg, NodeError, Outbox, Port, QosClass};
 use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 #[derive(Debug, Clone, PartialEq)]
@@ -169,11 +169,33 @@ pub struct XrayAlignerNode {
     bad_images: u64,
 }
 
-const IN_TF: usize = 0;
-const IN_EVENTS: usize = 1;
-const IN_IMAGE: usize = 2;
+/// The X-ray aligner's inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Input {
+    /// `/tf`: the C-arm's poses during the exposure.
+    Tf,
+    /// `/scan/events`: the exposure's window.
+    Events,
+    /// `/xray/image`, with `image_source: topic`.
+    Image,
+}
+
+/// The X-ray aligner's outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// `/xray/image`: the radiograph read from its DICOM file (`image_source: dicom`).
+    Image,
+    /// `/xray/overlay`: the radiograph placed in the table frame.
+    Overlay,
+}
+
+type Out = Outbox<Input, Output>;
 
 impl XrayAlignerNode {
+    /// Radiographs placed, so far.
+    pub fn placed(&self) -> u64 {
+        self.placed
+    }
     /// Builds the node from its parameters (a `dicom_file` is loaded at the first tick).
     pub fn new(p: &Params) -> Result<Self, ParamError> {
         let cfg = config(p)?;
@@ -195,11 +217,7 @@ impl XrayAlignerNode {
     }
 
     /// Index of `/xray/overlay` among the outputs (`/xray/image` comes first when loading DICOM).
-    fn overlay_output(&self) -> usize {
-        usize::from(!self.cfg.from_topic)
-    }
-
-    fn load(&mut self, out: &mut Outbox) {
+    fn load(&mut self, out: &mut Out) {
         self.load_requested = false;
         let path = PathBuf::from(&self.cfg.dicom_file);
         match dicom::read_file(&path) {
@@ -214,7 +232,7 @@ impl XrayAlignerNode {
                 );
                 self.loaded += 1;
                 let stamp = f.info.acquisition_start_ns.or(self.scan.map(|s| s.start_ns)).unwrap_or(0);
-                out.publish(0, Msg::Image(Arc::new(mono16_msg(&f.image, stamp, &self.cfg.carm_frame))));
+                out.publish(Output::Image, Msg::Image(Arc::new(mono16_msg(&f.image, stamp, &self.cfg.carm_frame))));
                 self.pending = Some((f.image, f.info));
             }
             Err(e) => {
@@ -239,7 +257,7 @@ impl XrayAlignerNode {
     }
 
     /// Places the pending radiograph if its exposure is complete and posed (or `force`).
-    fn try_place(&mut self, now_ns: i64, force: bool, out: &mut Outbox) {
+    fn try_place(&mut self, now_ns: i64, force: bool, out: &mut Out) {
         let Some((image, info)) = &self.pending else { return };
         let (scan_id, start, end) = match self.exposure(info) {
             Ok(w) => w,
@@ -278,7 +296,7 @@ impl XrayAlignerNode {
                         log::error!("xray_aligner: cannot write xray.png and xray.json in {}: {e}", dir.display());
                     }
                 }
-                out.publish(self.overlay_output(), Msg::Marker(Arc::new(marker)));
+                out.publish(Output::Overlay, Msg::Marker(Arc::new(marker)));
             }
             Err(e) => {
                 self.place_errors += 1;
@@ -401,25 +419,27 @@ fn from_msg(m: &Image, monochrome1: bool) -> Result<Radiograph, String> {
 }
 
 impl Component for XrayAlignerNode {
+    type Input = Input;
+    type Output = Output;
     fn node_name(&self) -> &'static str {
         "xray_aligner"
     }
-    fn inputs(&self) -> Vec<Port> {
+    fn inputs(&self) -> Vec<(Input, Port)> {
         let mut v = vec![
-            Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable),
-            Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable),
+            (Input::Tf, Port::new("/tf", TFMessage::TYPE_NAME, QosClass::Reliable)),
+            (Input::Events, Port::new("/scan/events", ScanEvent::TYPE_NAME, QosClass::Reliable)),
         ];
         if self.cfg.from_topic {
-            v.push(Port::new("/xray/image", Image::TYPE_NAME, QosClass::Reliable));
+            v.push((Input::Image, Port::new("/xray/image", Image::TYPE_NAME, QosClass::Reliable)));
         }
         v
     }
-    fn outputs(&self) -> Vec<Port> {
+    fn outputs(&self) -> Vec<(Output, Port)> {
         let mut v = Vec::new();
         if !self.cfg.from_topic {
-            v.push(Port::new("/xray/image", Image::TYPE_NAME, QosClass::Reliable));
+            v.push((Output::Image, Port::new("/xray/image", Image::TYPE_NAME, QosClass::Reliable)));
         }
-        v.push(Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::State));
+        v.push((Output::Overlay, Port::new("/xray/overlay", Marker::TYPE_NAME, QosClass::State)));
         v
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
@@ -433,17 +453,17 @@ impl Component for XrayAlignerNode {
         self.cfg = c;
         Ok(())
     }
-    fn handle(&mut self, input: usize, msg: &Msg, out: &mut Outbox) -> Result<(), NodeError> {
+    fn handle(&mut self, input: Input, msg: &Msg, out: &mut Out) -> Result<(), NodeError> {
         match (input, msg) {
-            (IN_TF, Msg::Tf(t)) => {
+            (Input::Tf, Msg::Tf(t)) => {
                 let added = self.tf.add_dynamic(t);
                 if self.pending.is_some() && self.end_seen_ns.is_some() {
                     let now = self.tf.latest_pose_stamp().unwrap_or(0);
                     self.try_place(now, false, out);
                 }
-                added.map_err(NodeError::new)
+                added.map_err(NodeError::malformed)
             }
-            (IN_EVENTS, Msg::ScanEvent(e)) => {
+            (Input::Events, Msg::ScanEvent(e)) => {
                 let stamp = e.header.stamp.nanos();
                 match e.event {
                     ScanEvent::START => {
@@ -469,7 +489,7 @@ impl Component for XrayAlignerNode {
                 }
                 Ok(())
             }
-            (IN_IMAGE, Msg::Image(m)) if self.cfg.from_topic => match from_msg(m, self.cfg.topic_monochrome1) {
+            (Input::Image, Msg::Image(m)) if self.cfg.from_topic => match from_msg(m, self.cfg.topic_monochrome1) {
                 Ok(r) => {
                     self.pending = Some((r, XrayInfo::default()));
                     self.loaded += 1;
@@ -477,13 +497,13 @@ impl Component for XrayAlignerNode {
                 }
                 Err(e) => {
                     self.bad_images += 1;
-                    Err(NodeError::new(format!("/xray/image: {e}")))
+                    Err(NodeError::malformed(format!("/xray/image: {e}")))
                 }
             },
-            (i, m) => Err(NodeError::new(format!("unexpected {} on input {i}", m.type_name()))),
+            (i, m) => Err(NodeError::unexpected(i, m)),
         }
     }
-    fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
+    fn tick(&mut self, now_ns: i64, out: &mut Out) {
         if self.load_requested {
             self.load(out);
         }
@@ -491,7 +511,7 @@ impl Component for XrayAlignerNode {
             self.try_place(now_ns, false, out);
         }
     }
-    fn finish(&mut self, out: &mut Outbox) {
+    fn finish(&mut self, out: &mut Out) {
         if self.load_requested {
             self.load(out);
         }
