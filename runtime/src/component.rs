@@ -511,13 +511,20 @@ mod tests {
         assert_eq!(c.inputs().iter().map(|p| p.topic.as_str()).collect::<Vec<_>>(), ["/scan/events", "laser_line"]);
         let mut out = Outbox::default();
         c.handle(1, &Msg::LaserLine(Arc::default()), &mut out).unwrap();
-        assert_eq!(out.items.iter().map(|(k, _)| *k).collect::<Vec<_>>(), [0], "Profiles is output 0; Never is dropped");
+        assert_eq!(
+            out.items.iter().map(|(k, _)| *k).collect::<Vec<_>>(),
+            [0],
+            "Profiles is output 0; Never is dropped"
+        );
         let e = c.handle(0, &Msg::ScanEvent(Arc::default()), &mut out).unwrap_err();
         assert_eq!((e.kind(), e.to_string().as_str()), ("malformed", "unknown scan event 9"));
         assert_eq!(out.refused, [(1, NodeError::not_ready("no pose"))], "the line's refusal under input 1");
         let e = c.handle(1, &Msg::ScanEvent(Arc::default()), &mut out).unwrap_err();
         assert_eq!(e.kind(), "wrong_type");
-        assert_eq!(e.to_string(), "unexpected xsurf_msgs/msg/ScanEvent on Lines, which carries xsurf_msgs/msg/LaserLine");
+        assert_eq!(
+            e.to_string(),
+            "unexpected xsurf_msgs/msg/ScanEvent on Lines, which carries xsurf_msgs/msg/LaserLine"
+        );
         assert_eq!(c.handle(2, &Msg::ScanEvent(Arc::default()), &mut out).unwrap_err().kind(), "wrong_type");
         assert!(c.as_any().downcast_ref::<Node>().is_some());
         let e = NodeError::not_ready("no pose").context("line at 1.5");
