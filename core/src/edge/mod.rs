@@ -12,6 +12,7 @@
 
 mod fit;
 mod lanes;
+mod plane;
 mod track;
 
 use crate::image::{Encoding, ImageError, ImageView};
@@ -674,12 +675,17 @@ pub struct EdgeDetector {
     width_px: Option<f32>,
     /// Scratch for widths' medians (the frame's, each run's).
     widths: Vec<f32>,
+    /// The frame's signal as bytes, where it is not read in place.
+    plane: Plane,
 }
 
 /// Where one detection searches: the image, its region and its signal.
 struct Search<'a, 'b> {
     image: &'a ImageView<'b>,
     cfg: &'a EdgeConfig,
+    /// The signal as bytes, one row of `inner.len()` per sample of `outer` (a transposed or
+    /// colour image; `None`: mono8 rows read in place, or the float profiles of mono16).
+    plane: Option<&'a [u8]>,
     /// Samples along the line (rows of a vertical line).
     outer: std::ops::Range<u32>,
     /// Positions across the line searched (columns of a vertical line).
@@ -696,7 +702,10 @@ impl Search<'_, '_> {
     fn sample(&self, s: u32, near: Option<(f32, f32)>, buf: &mut Scratch) -> Option<Peak> {
         let enc = self.image.encoding();
         let (x0, x1) = (self.inner.start as usize, self.inner.end as usize);
-        let peak = if self.vertical && enc == Encoding::Mono8 {
+        let peak = if let Some(plane) = self.plane {
+            let (n, k) = (x1 - x0, (s - self.outer.start) as usize);
+            self.locate(&plane[k * n..(k + 1) * n], near, &mut buf.contrast_u8)
+        } else if self.vertical && enc == Encoding::Mono8 {
             self.locate(&self.image.row(s)[x0..x1], near, &mut buf.contrast_u8)
         } else {
             fill_profile(self.image, s, self.inner.clone(), self.vertical, self.cfg.channel, &mut buf.profile);
@@ -823,8 +832,17 @@ impl EdgeDetector {
         let samples = if vertical { h } else { w };
         out.reset(cfg.line_orientation, w, h, samples as usize, enc.is_color());
         let (outer, inner) = if vertical { (y0..y1, x0..x1) } else { (x0..x1, y0..y1) };
-        let search =
-            Search { image, cfg, outer, inner, vertical, scale: level_scale(enc), saturation: enc.max_value() };
+        let plane = fill_plane(image, cfg.channel, vertical, (x0..x1, y0..y1), &mut self.plane);
+        let search = Search {
+            image,
+            cfg,
+            plane: plane.then_some(&self.plane.bytes[..]),
+            outer,
+            inner,
+            vertical,
+            scale: level_scale(enc),
+            saturation: enc.max_value(),
+        };
         let mut stats = DetectStats::default();
         self.state.clear();
         self.state.resize(samples as usize, (false, None));
@@ -878,6 +896,52 @@ impl EdgeDetector {
         }
         Ok(stats)
     }
+}
+
+/// The detector's bytes of `image` in `plane` (see [`Search::plane`]) where its encoding and
+/// orientation need them: a mono8 image's columns transposed, a colour image's channel
+/// extracted (and transposed for a horizontal line). False for mono8 rows (read in place) and
+/// mono16 (read as floats).
+fn fill_plane(
+    image: &ImageView<'_>,
+    channel: Channel,
+    vertical: bool,
+    (xs, ys): (std::ops::Range<u32>, std::ops::Range<u32>),
+    plane: &mut Plane,
+) -> bool {
+    let (x0, w) = (xs.start as usize, xs.len());
+    let (y0, h) = (ys.start as usize, ys.len());
+    match image.encoding() {
+        Encoding::Mono8 if vertical => false,
+        Encoding::Mono8 => {
+            plane::transpose(h, w, |j| &image.row((y0 + j) as u32)[x0..], &mut plane.bytes);
+            true
+        }
+        enc @ (Encoding::Rgb8 | Encoding::Bgr8) => {
+            let rgb = enc == Encoding::Rgb8;
+            let rows = if vertical { &mut plane.bytes } else { &mut plane.colour };
+            // Every byte is written below: the buffer is only sized, not cleared.
+            rows.resize(w * h, 0);
+            for (j, out) in rows.chunks_exact_mut(w.max(1)).enumerate().take(h) {
+                plane::channel_row(&image.row((y0 + j) as u32)[3 * x0..], rgb, channel, out);
+            }
+            if !vertical {
+                let colour = &plane.colour;
+                plane::transpose(h, w, |j| &colour[j * w..], &mut plane.bytes);
+            }
+            true
+        }
+        Encoding::Mono16 => false,
+    }
+}
+
+/// The detector's byte signal of a frame and the colour rows it is made from.
+#[derive(Debug, Default, Clone)]
+struct Plane {
+    /// One row per sample (see [`Search::plane`]).
+    bytes: Vec<u8>,
+    /// A colour image's channel, row-major, before it is transposed.
+    colour: Vec<u8>,
 }
 
 /// Places the narrow-line samples that had one usable edge, with the mean sigma of this frame's
@@ -1046,6 +1110,59 @@ mod tests {
                 if m < p.len() {
                     let scalar = (walk_left(p, m, m.saturating_sub(reach), cut), walk_right(p, m, m + reach, cut));
                     proptest::prop_assert_eq!(u8::run(p, m, reach, cut), scalar, "{:?} m {} reach {} cut {}", p, m, reach, cut);
+                }
+            }
+        }
+    }
+
+    /// Every encoding and orientation reaches the same byte path: a frame's columns (the frame
+    /// transposed, its line horizontal) and its colour versions (the frame in the red channel,
+    /// red first or blue first) give the mono8 rows' samples bit for bit, with and without a
+    /// region of interest.
+    #[test]
+    fn columns_and_colour_give_the_rows_samples_exactly() {
+        use crate::rig::Rig;
+        use crate::synth::{LaserModel, ScanSettings, Scanner, Scene};
+        let settings = ScanSettings { encoding: Encoding::Mono8, ..Default::default() };
+        let s = Scanner::new(Scene::by_name("phantom").unwrap(), Rig::study(320, 240), LaserModel::default(), settings)
+            .unwrap();
+        let img = s.render(0, s.frame_count() / 2);
+        let (w, h) = (img.width, img.height);
+        let mut t = Image::new(h, w, Encoding::Mono8);
+        for y in 0..h {
+            for x in 0..w {
+                t.data[(x * h + y) as usize] = img.data[(y * w + x) as usize];
+            }
+        }
+        let colour = |enc: Encoding, src: &Image| {
+            let mut c = Image::new(src.width, src.height, enc);
+            let r = if enc == Encoding::Rgb8 { 0 } else { 2 };
+            for (i, &v) in src.data.iter().enumerate() {
+                c.data[3 * i + r] = v;
+            }
+            c
+        };
+        let roi = Roi { x_offset: 37, y_offset: 21, width: 201, height: 150 };
+        let swapped = Roi { x_offset: roi.y_offset, y_offset: roi.x_offset, width: roi.height, height: roi.width };
+        for (rows_roi, cols_roi) in [(Roi::default(), Roi::default()), (roi, swapped)] {
+            let rows = detect(&img, EdgeConfig { roi: rows_roi, ..Default::default() });
+            assert!(rows.found() > 100, "{}", rows.found());
+            let horizontal =
+                EdgeConfig { line_orientation: Orientation::Horizontal, roi: cols_roi, ..Default::default() };
+            let cols = detect(&t, horizontal.clone());
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            let same = |a: &LaserLine, b: &LaserLine, swap: bool| {
+                let (u, v) = if swap { (&b.v, &b.u) } else { (&b.u, &b.v) };
+                (bits(&a.u), bits(&a.v), bits(&a.strength), bits(&a.width))
+                    == (bits(u), bits(v), bits(&b.strength), bits(&b.width))
+            };
+            assert!(same(&cols, &rows, true), "columns: u and v swap");
+            for enc in [Encoding::Rgb8, Encoding::Bgr8] {
+                for channel in [Channel::Red, Channel::RedMinusOthers] {
+                    let c = detect(&colour(enc, &img), EdgeConfig { roi: rows_roi, channel, ..Default::default() });
+                    assert!(same(&c, &rows, false), "{enc:?} {channel:?}");
+                    let c = detect(&colour(enc, &t), EdgeConfig { channel, ..horizontal.clone() });
+                    assert!(same(&c, &rows, true), "{enc:?} {channel:?} columns");
                 }
             }
         }

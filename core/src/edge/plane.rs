@@ -1,0 +1,232 @@
+//! The detector's signal as one byte per pixel, one row per sample: what the byte path of the
+//! detector reads. A mono8 image with a vertical line is read in place; a horizontal line's
+//! columns are transposed once per frame in 16x16 tiles, and a colour image's channel (the
+//! laser's colour, or its colour against the others) is extracted once per frame, 32 pixels at
+//! a time. Both run in 16-byte lanes (SSE2, NEON or scalar through `wide`), so every encoding
+//! and orientation reaches the same vectorised detector as mono8 rows.
+
+use super::Channel;
+use wide::u8x16;
+
+/// 16 bytes from the front of `s` (which holds at least 16).
+#[inline(always)]
+fn load(s: &[u8]) -> u8x16 {
+    let mut a = [0u8; 16];
+    a.copy_from_slice(&s[..16]);
+    u8x16::new(a)
+}
+
+/// One perfect shuffle of 8 registers: register `i` is interleaved with register `i + 4`, the
+/// low halves first. Three of them turn 8 rows of 16 bytes into 16 columns of 8, two to a
+/// register.
+#[inline(always)]
+fn shuffle8(v: &[u8x16; 8]) -> [u8x16; 8] {
+    let (lo, hi) = (u8x16::unpack_low, u8x16::unpack_high);
+    [
+        lo(v[0], v[4]),
+        hi(v[0], v[4]),
+        lo(v[1], v[5]),
+        hi(v[1], v[5]),
+        lo(v[2], v[6]),
+        hi(v[2], v[6]),
+        lo(v[3], v[7]),
+        hi(v[3], v[7]),
+    ]
+}
+
+/// The same over 6 registers (register `i` with `i + 3`): five of them separate the three
+/// channels of 32 pixels of 3 bytes.
+#[inline(always)]
+fn shuffle6(v: &[u8x16; 6]) -> [u8x16; 6] {
+    let (lo, hi) = (u8x16::unpack_low, u8x16::unpack_high);
+    [lo(v[0], v[3]), hi(v[0], v[3]), lo(v[1], v[4]), hi(v[1], v[4]), lo(v[2], v[5]), hi(v[2], v[5])]
+}
+
+/// The transpose of a `rows` x `cols` block of bytes whose row `j` is `row(j)` (at least `cols`
+/// bytes from its start): `dst[k * rows + j] = row(j)[k]`. Tiles of 8 rows by 16 columns in
+/// lanes (all in registers), the ragged edges one byte at a time.
+pub(super) fn transpose<'a>(rows: usize, cols: usize, row: impl Fn(usize) -> &'a [u8], dst: &mut Vec<u8>) {
+    // Every byte is written below: the buffer is only sized, not cleared.
+    dst.resize(rows * cols, 0);
+    let (full_rows, full_cols) = (rows / 8 * 8, cols / 16 * 16);
+    // Strips of 64 rows, 16 columns at a time: each column's 64 bytes of the strip (a cache
+    // line) are written whole while they are in the first-level cache, and each row's bytes are
+    // read in order.
+    for j0 in (0..full_rows).step_by(64) {
+        let j1 = (j0 + 64).min(full_rows);
+        for k in (0..full_cols).step_by(16) {
+            for j in (j0..j1).step_by(8) {
+                let mut v: [u8x16; 8] = std::array::from_fn(|i| load(&row(j + i)[k..]));
+                for _ in 0..3 {
+                    v = shuffle8(&v);
+                }
+                // Register i: column k + 2i of the 8 rows, then column k + 2i + 1.
+                for (i, t) in v.iter().enumerate() {
+                    let t = t.as_array();
+                    let at = (k + 2 * i) * rows + j;
+                    dst[at..at + 8].copy_from_slice(&t[..8]);
+                    dst[at + rows..at + rows + 8].copy_from_slice(&t[8..]);
+                }
+            }
+        }
+        for j in j0..j1 {
+            for (k, &b) in row(j)[full_cols..cols].iter().enumerate() {
+                dst[(full_cols + k) * rows + j] = b;
+            }
+        }
+    }
+    for j in full_rows..rows {
+        for (k, &b) in row(j)[..cols].iter().enumerate() {
+            dst[k * rows + j] = b;
+        }
+    }
+}
+
+/// The detector's byte for one pixel of channel `channel`, from its red, green and blue.
+#[inline(always)]
+fn combine(channel: Channel, r: u8x16, g: u8x16, b: u8x16) -> u8x16 {
+    match channel {
+        Channel::Red => r,
+        // r - (g + b) / 2 at or above zero, the half rounded down in the mean: within half a
+        // level of the exact value.
+        Channel::RedMinusOthers => r.saturating_sub((g >> 1) + (b >> 1) + (g & b & u8x16::splat(1))),
+        Channel::Luma => {
+            let (r, g, b) = (r.to_array(), g.to_array(), b.to_array());
+            u8x16::new(std::array::from_fn(|i| luma(r[i], g[i], b[i])))
+        }
+    }
+}
+
+/// Luma (0.299 R + 0.587 G + 0.114 B) rounded to a byte, in integers.
+#[inline(always)]
+fn luma(r: u8, g: u8, b: u8) -> u8 {
+    ((19_595 * u32::from(r) + 38_470 * u32::from(g) + 7_471 * u32::from(b) + 32_768) >> 16) as u8
+}
+
+/// The same for one pixel, one byte at a time.
+#[inline(always)]
+fn combine1(channel: Channel, r: u8, g: u8, b: u8) -> u8 {
+    match channel {
+        Channel::Red => r,
+        Channel::RedMinusOthers => r.saturating_sub(((u16::from(g) + u16::from(b)) / 2) as u8),
+        Channel::Luma => luma(r, g, b),
+    }
+}
+
+/// Channel `channel` of the 3-byte pixels of `px` (red first if `rgb`, else blue first) into
+/// `out`, one byte per pixel: 32 pixels at a time in lanes, the rest one at a time.
+pub(super) fn channel_row(px: &[u8], rgb: bool, channel: Channel, out: &mut [u8]) {
+    let n = out.len().min(px.len() / 3);
+    let full = n / 32 * 32;
+    for (src, dst) in px[..3 * full].chunks_exact(96).zip(out[..full].chunks_exact_mut(32)) {
+        let v: [u8x16; 6] = std::array::from_fn(|i| load(&src[16 * i..]));
+        let mut v = v;
+        for _ in 0..5 {
+            v = shuffle6(&v);
+        }
+        // v[0..2]: the first channel of 32 pixels, v[2..4] the second, v[4..6] the third.
+        for half in 0..2 {
+            let (first, g, last) = (v[half], v[2 + half], v[4 + half]);
+            let (r, b) = if rgb { (first, last) } else { (last, first) };
+            dst[16 * half..16 * half + 16].copy_from_slice(combine(channel, r, g, b).as_array());
+        }
+    }
+    for (p, o) in px[3 * full..3 * n].chunks_exact(3).zip(&mut out[full..n]) {
+        let (r, b) = if rgb { (p[0], p[2]) } else { (p[2], p[0]) };
+        *o = combine1(channel, r, p[1], b);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    /// A reproducible byte pattern with every value.
+    fn bytes(n: usize, seed: u64) -> Vec<u8> {
+        let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (0..n)
+            .map(|_| {
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                (s >> 33) as u8
+            })
+            .collect()
+    }
+
+    /// The lanes give the plain definition of a transpose, for blocks with and without ragged
+    /// edges, read from rows longer than the block.
+    #[test]
+    fn transpose_is_the_transpose() {
+        for (rows, cols) in [(16, 16), (32, 48), (17, 33), (5, 40), (40, 5), (1, 1), (0, 7), (31, 16)] {
+            let stride = cols + 3;
+            let src = bytes(rows * stride + 16, (rows * 100 + cols) as u64);
+            let mut dst = Vec::new();
+            transpose(rows, cols, |j| &src[j * stride..], &mut dst);
+            for j in 0..rows {
+                for k in 0..cols {
+                    assert_eq!(dst[k * rows + j], src[j * stride + k], "{rows}x{cols} at ({j}, {k})");
+                }
+            }
+        }
+    }
+
+    /// Every channel of every length, in lanes and one pixel at a time, against the plain
+    /// arithmetic: red exact, red against the others and luma within half a level of the exact
+    /// value.
+    #[test]
+    fn channel_rows_match_the_plain_arithmetic() {
+        for n in [0, 1, 31, 32, 33, 64, 100, 640] {
+            let px = bytes(3 * n, n as u64);
+            for rgb in [true, false] {
+                for channel in [Channel::Red, Channel::RedMinusOthers, Channel::Luma] {
+                    let mut out = vec![0u8; n];
+                    channel_row(&px, rgb, channel, &mut out);
+                    for (i, p) in px.chunks_exact(3).enumerate() {
+                        let (r, g, b) = if rgb { (p[0], p[1], p[2]) } else { (p[2], p[1], p[0]) };
+                        let (r, g, b) = (f32::from(r), f32::from(g), f32::from(b));
+                        let exact = match channel {
+                            Channel::Red => r,
+                            Channel::RedMinusOthers => (r - 0.5 * (g + b)).max(0.0),
+                            Channel::Luma => 0.299 * r + 0.587 * g + 0.114 * b,
+                        };
+                        let got = f32::from(out[i]);
+                        assert!((got - exact).abs() <= 0.51, "{channel:?} rgb {rgb} n {n} px {i}: {got} vs {exact}");
+                        if channel == Channel::Red {
+                            assert_eq!(got, exact);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod speed {
+    #![allow(clippy::unwrap_used)]
+    /// `cargo test --release -p xsurf-core --lib plane::speed -- --ignored --nocapture`
+    #[test]
+    #[ignore = "a timing probe"]
+    fn transpose_and_channel_rates() {
+        let (w, h) = (1920usize, 1200usize);
+        let src: Vec<u8> = (0..w * h * 3).map(|i| (i * 7 % 251) as u8).collect();
+        let mut dst = Vec::new();
+        for (w, h) in [(w, h), (h, w), (640, 480), (480, 640)] {
+            let t = std::time::Instant::now();
+            for _ in 0..100 {
+                super::transpose(h, w, |j| &src[j * w..], &mut dst);
+            }
+            let s = t.elapsed().as_secs_f64() / 100.0;
+            println!("transpose {w}x{h}: {:.0} us, {:.2} GB/s", s * 1e6, (w * h) as f64 / s * 1e-9);
+        }
+        let mut out = vec![0u8; w];
+        let t = std::time::Instant::now();
+        for _ in 0..100 {
+            for j in 0..h {
+                super::channel_row(&src[3 * w * j..], true, super::Channel::RedMinusOthers, &mut out);
+            }
+        }
+        let s = t.elapsed().as_secs_f64() / 100.0;
+        println!("channel {w}x{h}: {:.0} us, {:.2} Gpx/s", s * 1e6, (w * h) as f64 / s * 1e-9);
+    }
+}
