@@ -65,6 +65,11 @@ pub struct MesherReport {
     pub camera: String,
     /// The END (or ABORT) stamp.
     pub end: Option<String>,
+    /// The scan's final grid as the mesher published it on `cloud`: a cloud of this camera
+    /// with this stamp and this many points is the scan's last, and the merger need wait no
+    /// longer for it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub final_cloud: Option<FinalCloud>,
     /// The first frame's stamp.
     pub first_frame: Option<String>,
     /// Seconds from START to the first frame (not counted as lost: a camera not yet exposing).
@@ -95,6 +100,15 @@ pub struct MesherReport {
     pub scan_id: u32,
     /// The START stamp.
     pub start: Option<String>,
+}
+
+/// The mark of a scan's final cloud in its mesher's report.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct FinalCloud {
+    /// Its points (valid cells of the grid).
+    pub points: u64,
+    /// Its stamp (the grid's last frame).
+    pub stamp: String,
 }
 
 /// A message on `/scan/report`.

@@ -226,6 +226,34 @@ impl MergerNode {
         Ok(grid)
     }
 
+    /// Merges now if the scan has ended and every camera's final cloud is in: its mesher's
+    /// report of the scan names the final cloud (`final_cloud`: stamp and points), and the
+    /// camera's latest cloud is that one. A camera whose report has not come waits for the
+    /// bound (`merge_delay_s` after END).
+    fn merge_if_complete(&mut self, out: &mut Out) {
+        if self.pending_deadline.is_none() {
+            return;
+        }
+        let done = |k: usize, cam: &String| {
+            let Some(m) = self.reports.get(&(self.scan_id, cam.clone())).and_then(|r| r.mesher.as_ref()) else {
+                return false;
+            };
+            match (&m.final_cloud, self.clouds.get(&k)) {
+                // A mesher that does not mark its final cloud: the bound.
+                (None, _) => false,
+                // A scan without points: no cloud of it to wait for.
+                (Some(f), _) if f.points == 0 => true,
+                (Some(f), Some((stamp, grid))) => {
+                    convert::fmt_stamp(*stamp) == f.stamp && grid.valid() as u64 == f.points
+                }
+                (Some(_), None) => false,
+            }
+        };
+        if self.cfg.cameras.iter().enumerate().all(|(k, cam)| done(k, cam)) {
+            self.merge(out);
+        }
+    }
+
     fn merge(&mut self, out: &mut Out) {
         self.pending_deadline = None;
         if self.clouds.is_empty() {
@@ -644,17 +672,22 @@ impl Component for MergerNode {
                 let grid = self.check_cloud(i, c).inspect_err(|_| self.bad_clouds += 1)?;
                 self.clouds.insert(i, (c.header.stamp.nanos(), grid));
                 self.merged_current = false;
+                self.merge_if_complete(out);
                 Ok(())
             }
             (Input::Report, Msg::Text(t)) => {
                 let r = Report::parse(&t.data).map_err(|e| NodeError::malformed(format!("/scan/report: {e}")))?;
                 let scan = r.scan_id();
+                let merged = self.last_merged().filter(|(id, _)| *id == scan);
                 self.keep_report(r);
-                // A report of a scan already merged: its account is written again, whole.
-                if let Some((id, names)) = self.last_merged().filter(|(id, _)| *id == scan) {
-                    log::info!("merger: scan {id}: a report arrived after the merge; scan_report.json written again");
-                    let report = self.scan_report(id, &names);
-                    self.write_report(id, &report);
+                match merged {
+                    // A report of a scan already merged: its account is written again, whole.
+                    Some((id, names)) => {
+                        log::info!("merger: scan {id}: a report arrived after the merge; scan_report.json written again");
+                        let report = self.scan_report(id, &names);
+                        self.write_report(id, &report);
+                    }
+                    None => self.merge_if_complete(out),
                 }
                 Ok(())
             }
@@ -685,6 +718,7 @@ impl Component for MergerNode {
                     ScanEvent::END => {
                         self.scan_id = e.scan_id;
                         self.pending_deadline = Some(e.header.stamp.nanos() + self.cfg.delay_ns);
+                        self.merge_if_complete(out);
                     }
                     _ => {
                         self.pending_deadline = None;
@@ -882,6 +916,57 @@ mod tests {
         assert_eq!(r["cameras"].as_array().unwrap().len(), 2, "{r}");
         assert_eq!(r["cameras"][1]["camera"], "cam2", "{r}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The merge follows the last camera's final cloud (named by its mesher's report) at once,
+    /// whichever of END, the reports and the clouds comes last; a cloud that is not the final
+    /// one (another stamp, or as many points) does not start it, and the bound
+    /// (`merge_delay_s`) then merges nothing twice.
+    #[test]
+    fn the_merge_follows_the_last_final_cloud_without_waiting() {
+        use xsurf_runtime::harness::Harness;
+        let event = |scan_id, event, sec| {
+            let mut e = ScanEvent { scan_id, event, ..Default::default() };
+            e.header.stamp.sec = sec;
+            Msg::ScanEvent(Arc::new(e))
+        };
+        let mesher = |cam: &str, scan: u32, stamp: &str, points: u64| {
+            let json = serde_json::json!({"node": "mesher", "camera": cam, "scan_id": scan, "aborted": false,
+                "frames_expected": 20, "frames_received": 20, "frames_lost": 0, "frames_without_line": 0,
+                "gaps": [], "points_rejected": 0, "profiles_refused": 0,
+                "final_cloud": {"stamp": stamp, "points": points}});
+            Msg::Text(Arc::new(StringMsg { data: json.to_string() }))
+        };
+        let mut o = BTreeMap::new();
+        o.insert("refine".to_string(), xsurf_runtime::params::ParamValue::Bool(false));
+        let params = Params::resolve(&MergerParams::declarations(), &o).unwrap();
+        let mut h = Harness::new(boxed(MergerNode::new(&params).unwrap()), "merger", "/");
+        // END before the reports: the last of cam2's three messages merges.
+        h.feed("/scan/events", &event(1, ScanEvent::START, 10))
+            .feed("/cam1/cloud", &flat_cloud(30, 20, 0.0, 11))
+            .feed("/cam2/cloud", &flat_cloud(30, 20, 0.0, 11))
+            .feed("/scan/events", &event(1, ScanEvent::END, 14))
+            .feed("/scan/report", &mesher("cam1", 1, "11.000000000", 600))
+            .feed("/scan/report", &mesher("cam2", 1, "13.000000000", 600));
+        assert!(h.take("/surface/mesh").is_empty(), "cam2's final cloud (at 13 s) is not in");
+        h.feed("/cam2/cloud", &flat_cloud(30, 20, 0.0, 12));
+        assert!(h.take("/surface/mesh").is_empty(), "a cloud at 12 s is not the final one");
+        h.feed("/cam2/cloud", &flat_cloud(30, 20, 0.0, 13));
+        assert_eq!(h.take("/surface/mesh").len(), 1, "merged with no tick, at the final cloud");
+        h.tick(15_100_000_000);
+        assert_eq!((h.counter("merges"), h.take("/surface/mesh").len()), (Some(1), 0), "the bound merges nothing twice");
+        // The reports and clouds before END: END merges; a final cloud of as many points is
+        // required.
+        h.feed("/scan/events", &event(2, ScanEvent::START, 20))
+            .feed("/cam1/cloud", &flat_cloud(30, 20, 0.0, 21))
+            .feed("/cam2/cloud", &flat_cloud(30, 20, 0.0, 21))
+            .feed("/scan/report", &mesher("cam1", 2, "21.000000000", 600))
+            .feed("/scan/report", &mesher("cam2", 2, "21.000000000", 599))
+            .feed("/scan/events", &event(2, ScanEvent::END, 22));
+        assert!(h.take("/surface/mesh").is_empty(), "cam2's cloud in hand has 600 points, its final one 599");
+        h.feed("/scan/report", &mesher("cam2", 2, "21.000000000", 600));
+        assert_eq!(h.take("/surface/mesh").len(), 1);
+        assert_eq!((h.counter("merges"), h.errors()), (Some(2), 0), "{:?}", h.last_error());
     }
 
     /// Two cameras that see the same flat patch 0.3 mm apart (inside fuse_distance_m): after

@@ -10,7 +10,9 @@ xsurf_runtime::parameters! {
     pub struct MergerParams {
         /// camera namespaces whose /<cam>/cloud are merged
         cameras: Vec<String> = vec!["cam1".into(), "cam2".into()];
-        /// wait after END before merging, so the final clouds arrive first
+        /// the longest wait after END for the cameras' final clouds: the merge starts as soon as every
+        /// camera's mesher has reported its final cloud (`final_cloud` in its report) and that cloud is
+        /// in, or at this bound without the missing ones
         merge_delay_s: f64 = 1.0, unit "s", range 0.0..=600.0;
         /// longest triangle edge when meshing each camera's grid
         max_edge_m: f32 = MeshConfig::DEFAULT.max_edge_m, unit "m";

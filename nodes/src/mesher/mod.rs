@@ -15,7 +15,7 @@ pub const NODE: crate::registry::NodeType =
     crate::registry::NodeType::of::<MesherParams>("mesher", crate::registry::Role::PerCamera, 50, |p| Ok(boxed(MesherNode::new(p)?)));
 
 use crate::convert;
-use crate::scan_report::{Gap, MesherReport};
+use crate::scan_report::{FinalCloud, Gap, MesherReport};
 use std::path::PathBuf;
 use std::sync::Arc;
 use xsurf_core::edge::Orientation;
@@ -124,6 +124,8 @@ struct ScanAccount {
     points_rejected: u64,
     /// `(stamp before, stamp after, frames missing between)`.
     gaps: Vec<(i64, i64, u32)>,
+    /// The final cloud's stamp and points, once the scan is closed.
+    final_cloud: Option<(i64, usize)>,
 }
 
 impl ScanAccount {
@@ -143,6 +145,9 @@ impl ScanAccount {
             aborted,
             camera: camera.to_string(),
             end: t(end_ns),
+            final_cloud: self
+                .final_cloud
+                .map(|(stamp, points)| FinalCloud { points: points as u64, stamp: convert::fmt_stamp(stamp) }),
             first_frame: t(self.first_ns),
             first_frame_after_start_s: margin(self.start_ns, self.first_ns),
             frame_period_s: period_ns.map(|p| p as f64 * 1e-9),
@@ -342,11 +347,12 @@ impl MesherNode {
         let cleaned = grid.clean(&self.cfg.mesh);
         self.account.points_rejected = cleaned.rejected as u64;
         self.points_rejected += cleaned.rejected as u64;
+        let stamp = self.grid.stamps_ns().last().copied().unwrap_or(0);
+        self.account.final_cloud = Some((stamp, grid.valid()));
         let report = self.account.report(self.scan_id, &self.camera, aborted, end_ns, self.gaps.nominal_ns());
         out.publish(Output::Report, Msg::Text(Arc::new(StringMsg { data: report })));
         self.active = false;
         self.scans += 1;
-        let stamp = self.grid.stamps_ns().last().copied().unwrap_or(0);
         let mesh = mesh_grid(&grid, &self.cfg.mesh);
         self.triangles += mesh.triangles.len() as u64;
         self.mesh_points += mesh.positions.len() as u64;
