@@ -160,6 +160,18 @@ pub struct MergerNode {
     motion: Option<CarmMotion>,
     /// The last merge's cloud and mesh, published again between scans.
     last_outputs: crate::republish::Republisher<Output>,
+    /// The last merged scan's files, not yet written: they are written at the next tick, after
+    /// its surface has been published (a merge on the last final cloud puts the surface on the
+    /// wire first), with its account as it stands then.
+    unwritten: Option<Unwritten>,
+}
+
+/// A merged scan's files still to write (its meshes are the last merge's).
+struct Unwritten {
+    scan_id: u32,
+    /// The cameras in the surface.
+    names: Vec<String>,
+    refinement: Vec<Record>,
 }
 
 impl MergerNode {
@@ -199,6 +211,7 @@ impl MergerNode {
             seam_triangles: 0,
             motion: None,
             last_outputs: crate::republish::Republisher::default(),
+            unwritten: None,
         })
     }
 
@@ -254,7 +267,17 @@ impl MergerNode {
         }
     }
 
+    /// Writes the last merged scan's files if they are not yet written.
+    fn write_unwritten(&mut self) {
+        let Some(u) = self.unwritten.take() else { return };
+        let Some((id, merged, meshes)) = self.last_merge.take() else { return };
+        let report = self.scan_report(u.scan_id, &u.names);
+        self.write(u.scan_id, &merged, &meshes, &u.refinement, Some(&report));
+        self.last_merge = Some((id, merged, meshes));
+    }
+
     fn merge(&mut self, out: &mut Out) {
+        self.write_unwritten();
         self.pending_deadline = None;
         if self.clouds.is_empty() {
             return;
@@ -299,7 +322,8 @@ impl MergerNode {
         out.publish(Output::Cloud, cloud.clone());
         out.publish(Output::Mesh, marker.clone());
         self.last_outputs.set(vec![(Output::Cloud, cloud), (Output::Mesh, marker)]);
-        self.write(self.scan_id, &merged, &meshes, &refinement, Some(&scan_report));
+        Self::log_account(&scan_report);
+        self.unwritten = Some(Unwritten { scan_id: self.scan_id, names, refinement });
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
             self.scan_id,
@@ -415,10 +439,6 @@ impl MergerNode {
     /// missing from the merge (no cloud) and those that lost frames; the last two are logged.
     fn scan_report(&self, scan_id: u32, merged: &[String]) -> ScanReport {
         let missing: Vec<String> = self.cfg.cameras.iter().filter(|c| !merged.contains(c)).cloned().collect();
-        for c in &missing {
-            log::warn!("merger: scan {}: no surface from {c}: merged without it", scan_id);
-        }
-        let mut incomplete = Vec::new();
         let cameras: BTreeMap<&String, CameraAccount> = self
             .cfg
             .cameras
@@ -428,26 +448,8 @@ impl MergerNode {
                 Some((c, CameraAccount::new(r.mesher.clone()?, r.upstream.clone())))
             })
             .collect();
-        for c in merged {
-            match cameras.get(c) {
-                Some(a) if a.mesher.frames_lost > 0 => {
-                    let gaps: Vec<String> = a.mesher.gaps.iter().map(|g| format!("{} after {}", g.frames, g.after)).collect();
-                    log::warn!(
-                        "merger: scan {}: {c} lost {} of {} frames ({} in transport, {} refused on the way, {} never sent; gaps: {})",
-                        scan_id,
-                        a.mesher.frames_lost,
-                        a.mesher.frames_expected,
-                        a.frames_lost_in_transport,
-                        a.frames_refused_upstream,
-                        a.frames_not_sent,
-                        if gaps.is_empty() { "at the ends".to_string() } else { gaps.join(", ") }
-                    );
-                    incomplete.push(c.clone());
-                }
-                Some(_) => {}
-                None => log::warn!("merger: scan {}: no report from {c}'s mesher", scan_id),
-            }
-        }
+        let incomplete =
+            merged.iter().filter(|c| cameras.get(c).is_some_and(|a| a.mesher.frames_lost > 0)).cloned().collect();
         ScanReport {
             scan_id,
             merged: merged.to_vec(),
@@ -480,6 +482,33 @@ impl MergerNode {
         }
     }
 
+    /// Logs the cameras a scan's account finds missing from the merge, without a report, or
+    /// short of frames (with their gaps).
+    fn log_account(report: &ScanReport) {
+        let id = report.scan_id;
+        for c in &report.missing {
+            log::warn!("merger: scan {id}: no surface from {c}: merged without it");
+        }
+        for c in &report.merged {
+            match report.cameras.iter().find(|a| &a.mesher.camera == c) {
+                Some(a) if a.mesher.frames_lost > 0 => {
+                    let gaps: Vec<String> = a.mesher.gaps.iter().map(|g| format!("{} after {}", g.frames, g.after)).collect();
+                    log::warn!(
+                        "merger: scan {id}: {c} lost {} of {} frames ({} in transport, {} refused on the way, {} never sent; gaps: {})",
+                        a.mesher.frames_lost,
+                        a.mesher.frames_expected,
+                        a.frames_lost_in_transport,
+                        a.frames_refused_upstream,
+                        a.frames_not_sent,
+                        if gaps.is_empty() { "at the ends".to_string() } else { gaps.join(", ") }
+                    );
+                }
+                Some(_) => {}
+                None => log::warn!("merger: scan {id}: no report from {c}'s mesher"),
+            }
+        }
+    }
+
     /// Writes `scan_<id>/scan_report.json`.
     fn write_report(&mut self, scan_id: u32, report: &ScanReport) {
         let Some(out) = self.cfg.output_dir.clone() else { return };
@@ -509,6 +538,11 @@ impl MergerNode {
         self.overlays.insert(scan_id, plane);
         while self.overlays.len() > 4 {
             self.overlays.pop_first();
+        }
+        // A merged scan whose files are still to write takes it then.
+        let unwritten = self.unwritten.as_ref().is_some_and(|u| u.scan_id == scan_id);
+        if unwritten {
+            return Ok(());
         }
         if let Some((id, merged, meshes)) = self.last_merge.take() {
             if id == scan_id {
@@ -680,7 +714,10 @@ impl Component for MergerNode {
                 let scan = r.scan_id();
                 let merged = self.last_merged().filter(|(id, _)| *id == scan);
                 self.keep_report(r);
+                let unwritten = self.unwritten.as_ref().is_some_and(|u| u.scan_id == scan);
                 match merged {
+                    // Its files are still to write, with the account as it stands then.
+                    Some(_) if unwritten => {}
                     // A report of a scan already merged: its account is written again, whole.
                     Some((id, names)) => {
                         log::info!("merger: scan {id}: a report arrived after the merge; scan_report.json written again");
@@ -743,8 +780,12 @@ impl Component for MergerNode {
         }
     }
     fn tick(&mut self, now_ns: i64, out: &mut Out) {
+        // The files of a merge made while handling a message (its surface is out by now).
+        self.write_unwritten();
         if self.pending_deadline.is_some_and(|d| now_ns >= d) {
             self.merge(out);
+            // The bound: the surface waits for its files (the slower path anyway).
+            self.write_unwritten();
         }
         self.last_outputs.tick(self.cfg.republish_ns, now_ns, out);
     }
@@ -752,6 +793,11 @@ impl Component for MergerNode {
         if !self.merged_current {
             self.merge(out);
         }
+        self.write_unwritten();
+    }
+    /// At once while a merged scan's files are still to write.
+    fn next_tick_ns(&self) -> Option<i64> {
+        self.unwritten.as_ref().map(|_| i64::MIN)
     }
     /// Bulk work: the live host runs it behind the frame path.
     fn bulk(&self) -> bool {
@@ -937,8 +983,11 @@ mod tests {
                 "final_cloud": {"stamp": stamp, "points": points}});
             Msg::Text(Arc::new(StringMsg { data: json.to_string() }))
         };
+        let dir = std::env::temp_dir().join(format!("xsurf-merger-final-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
         let mut o = BTreeMap::new();
         o.insert("refine".to_string(), xsurf_runtime::params::ParamValue::Bool(false));
+        o.insert("output_dir".to_string(), xsurf_runtime::params::ParamValue::String(dir.to_string_lossy().into()));
         let params = Params::resolve(&MergerParams::declarations(), &o).unwrap();
         let mut h = Harness::new(boxed(MergerNode::new(&params).unwrap()), "merger", "/");
         // END before the reports: the last of cam2's three messages merges.
@@ -953,7 +1002,9 @@ mod tests {
         assert!(h.take("/surface/mesh").is_empty(), "a cloud at 12 s is not the final one");
         h.feed("/cam2/cloud", &flat_cloud(30, 20, 0.0, 13));
         assert_eq!(h.take("/surface/mesh").len(), 1, "merged with no tick, at the final cloud");
+        assert!(!dir.join("scan_1/merged.ply").exists(), "the surface goes out before its files are written");
         h.tick(15_100_000_000);
+        assert!(dir.join("scan_1/merged.ply").exists() && dir.join("scan_1/scan_report.json").exists());
         assert_eq!((h.counter("merges"), h.take("/surface/mesh").len()), (Some(1), 0), "the bound merges nothing twice");
         // The reports and clouds before END: END merges; a final cloud of as many points is
         // required.
@@ -967,6 +1018,9 @@ mod tests {
         h.feed("/scan/report", &mesher("cam2", 2, "21.000000000", 600));
         assert_eq!(h.take("/surface/mesh").len(), 1);
         assert_eq!((h.counter("merges"), h.errors()), (Some(2), 0), "{:?}", h.last_error());
+        h.finish();
+        assert!(dir.join("scan_2/merged.ply").exists(), "finish writes what is unwritten");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// Two cameras that see the same flat patch 0.3 mm apart (inside fuse_distance_m): after
