@@ -2,7 +2,7 @@
 //!
 //! Reads the actions `arg` (overridden by `NAME:=VALUE` on the command line), `let`, `node`
 //! (`exec`, `pkg` ignored, `name`, `namespace`, `param` values and `from` files, `remap`,
-//! `args`, `ros_args`, `respawn`, `respawn_delay`), `include` (with `arg`), `group` and `push_ros_namespace` (also spelt
+//! `args`, `ros_args`, `respawn`, `respawn_delay`, `env` as `name`/`value` pairs), `include` (with `arg`), `group` and `push_ros_namespace` (also spelt
 //! `push-ros-namespace`), with the substitutions `$(var NAME)`, `$(env NAME [DEFAULT])` and
 //! `$(dirname)`. Anything else is an error naming the file and the action.
 //!
@@ -49,6 +49,8 @@ pub struct NodeSpec {
     pub ros_args: Vec<String>,
     /// Start the node again when it exits (`respawn`), after `respawn_delay` seconds.
     pub respawn: Option<Duration>,
+    /// Environment variables of its process (`env`: `name`, `value`), in order.
+    pub env: Vec<(String, String)>,
 }
 
 impl NodeSpec {
@@ -248,6 +250,7 @@ fn node(body: &Value, scope: &Scope) -> anyhow::Result<NodeSpec> {
         args: Vec::new(),
         ros_args: Vec::new(),
         respawn: None,
+        env: Vec::new(),
     };
     let respawn = match field(body, "respawn") {
         None => false,
@@ -294,6 +297,14 @@ fn node(body: &Value, scope: &Scope) -> anyhow::Result<NodeSpec> {
     }
     if let Some(a) = field(body, "ros_args") {
         spec.ros_args = text(a, "ros_args", scope)?.split_whitespace().map(str::to_string).collect();
+    }
+    for e in field(body, "env").and_then(Value::as_sequence).into_iter().flatten() {
+        let name = text(field(e, "name").ok_or_else(|| anyhow!("env without name"))?, "env name", scope)?;
+        let value = text(field(e, "value").ok_or_else(|| anyhow!("env {name} without value"))?, "env value", scope)?;
+        if name.is_empty() || name.contains('=') {
+            bail!("node {}: env name {name:?} is not a variable name", spec.fq_name());
+        }
+        spec.env.push((name, value));
     }
     Ok(spec)
 }
@@ -364,6 +375,7 @@ fn node_command(n: &NodeSpec, inline: Option<&Path>) -> Command {
         cmd.args(["-r".to_string(), format!("{from}:={to}")]);
     }
     cmd.args(&n.ros_args);
+    cmd.envs(n.env.iter().map(|(k, v)| (k, v)));
     cmd
 }
 
@@ -442,10 +454,28 @@ fn start_composed(nodes: &[NodeSpec], inline: Option<&Path>) -> anyhow::Result<R
     if let Some(f) = inline {
         ros.extend(["--params-file".into(), f.to_string_lossy().into_owned()]);
     }
+    // One process: the nodes' environments together, and two values of one variable an error.
+    let mut env: BTreeMap<String, (String, String)> = BTreeMap::new();
+    for n in nodes {
+        for (k, v) in &n.env {
+            match env.get(k) {
+                Some((other, w)) if w != v => {
+                    bail!(
+                        "env {k}: node {} sets {v:?} and node {other} {w:?}, which one process cannot have",
+                        n.fq_name()
+                    )
+                }
+                _ => {
+                    env.insert(k.clone(), (n.fq_name(), v.clone()));
+                }
+            }
+        }
+    }
     let exe = std::env::current_exe()?;
     let command = move || {
         let mut cmd = Command::new(&exe);
         cmd.args(&args).args(&ros);
+        cmd.envs(env.iter().map(|(k, (_, v))| (k, v)));
         cmd
     };
     let mut r = spawn("xsurf compose", command())?;
@@ -607,7 +637,7 @@ mod tests {
   - node: {exec: edge_detector, remap: [{from: image_raw, to: image}]}
   - node: {exec: /opt/bin/triangulator, name: tri, namespace: sub}
 - include: {file: inner.launch.yaml, arg: [{name: who, value: m2}]}
-- node: {exec: mesher, respawn: "true", respawn_delay: 2.5}
+- node: {exec: mesher, respawn: "true", respawn_delay: 2.5, env: [{name: GLIBC_TUNABLES, value: $(var speed)}]}
 - node: {exec: merger, respawn: false}
 "#,
         )
@@ -617,6 +647,7 @@ mod tests {
         let names: Vec<String> = nodes.iter().map(NodeSpec::fq_name).collect();
         assert_eq!(names, ["/c_arm_pose", "/cam1/edge_detector", "/cam1/sub/tri", "/m2", "/mesher", "/merger"]);
         assert_eq!(nodes[4].respawn, Some(Duration::from_millis(2500)));
+        assert_eq!(nodes[4].env, [("GLIBC_TUNABLES".to_string(), "0.14".to_string())]);
         assert_eq!((nodes[0].respawn, nodes[5].respawn), (None, None));
         assert_eq!(nodes[0].param_files, [dir.join("p.yaml")]);
         assert_eq!(nodes[0].params[0], ("speed".to_string(), serde_yaml::from_str::<Value>("0.14").unwrap()));
@@ -637,6 +668,11 @@ mod tests {
         bad("launch:\n- node: {exec: merger, respawn: maybe}\n", "respawn: \"maybe\" is not true or false");
         bad("launch:\n- node: {exec: merger, respawn: true, respawn_delay: -1}\n", "respawn_delay: \"-1\"");
         bad("launch:\n- node: {exec: merger, param: [{from: /no/such.yaml}]}\n", "/no/such.yaml does not exist");
+        bad(
+            "launch:\n- node: {exec: merger, env: [{name: A=B, value: c}]}\n",
+            "env name \"A=B\" is not a variable name",
+        );
+        bad("launch:\n- node: {exec: merger, env: [{name: A}]}\n", "env A without value");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
@@ -656,6 +692,7 @@ mod tests {
             args: vec![],
             ros_args: vec![],
             respawn: None,
+            env: vec![("MALLOC_ARENA_MAX".into(), "2".into())],
         };
         assert!(
             executable("xray_aligner").is_none(),
@@ -664,6 +701,8 @@ mod tests {
         let cmd = node_command(&spec, None);
         let args: Vec<String> = cmd.get_args().map(|a| a.to_string_lossy().into_owned()).collect();
         assert_eq!(cmd.get_program(), std::env::current_exe().unwrap().as_os_str());
+        let env: Vec<_> = cmd.get_envs().collect();
+        assert_eq!(env, [(std::ffi::OsStr::new("MALLOC_ARENA_MAX"), Some(std::ffi::OsStr::new("2")))]);
         assert_eq!(
             args,
             ["compose", "/xray/aligner=xray_aligner", "--ros-args", "--params-file", "p.yaml", "-r", "in:=out"]
