@@ -84,6 +84,16 @@ def hwm(pid):
     return None
 
 
+def stop(proc, timeout, killed=-9):
+    """SIGTERM to the launcher, then SIGKILL after `timeout` s; its exit code, or `killed`."""
+    proc.send_signal(signal.SIGTERM)
+    try:
+        return proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return killed
+
+
 def pct(v, q):
     if not v:
         return None
@@ -146,12 +156,7 @@ def main(bin_dir, launch, params, mode, seconds, fps, out):
         c1 = cpu(p)
         if c1 is not None and cpu0.get(p) is not None:
             procs[label(p)] = {"cpu_percent": round(100 * (c1 - cpu0[p]) / window, 1), "peak_rss_mib": round((hwm(p) or 0) / 2**20, 1)}
-    proc.send_signal(signal.SIGTERM)
-    try:
-        code = proc.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        code = -9
+    code = stop(proc, 30)
     period = 1e9 / fps
     result = {"tf_baseline_ms_p50": round(pct(tf_lat, 0.5) or -1, 2), "tf_baseline_ms_p99": round(pct(tf_lat, 0.99) or -1, 2), "mode": mode, "fps": fps, "window_s": round(window, 2), "launch_exit": code, "cameras": {}, "processes": procs}
     published = {c: [] for c in readers}

@@ -7,14 +7,13 @@ scan on /scan/request (START) as a hospital controller would, and records, as a 
 probe, when it receives the scan's END on /scan/events and the scan's merged surface on
 /surface/cloud (the merger publishes it with /surface/mesh, from the same merge; a full body's
 mesh Marker is some 40 MB of Point structs, which the Python probe takes seconds to decode, so
-the cloud, a byte array, times the arrival). The latency is the cloud's receive time minus the
+the cloud, a byte array, times the arrival; the Marker's size is computed, not measured). The latency is the cloud's receive time minus the
 END's receive time (and, beside it, minus the END's stamp). Prints one JSON line.
 usage: bench_merge_probe.py BIN_DIR LAUNCH PARAMS MODE SCANS OUT
 """
 import json
 import os
 import pathlib
-import signal
 import subprocess
 import sys
 import threading
@@ -27,15 +26,12 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent / "tests/py"))
+from bench_live_probe import pct, stop  # noqa: E402
 from ros_types import Header, PointCloud2, ScanEvent, Time  # noqa: E402
 
 START, END = 0, 1
-
-
-def pct(v, q):
-    v = sorted(v)
-    return v[min(len(v) - 1, int(q * len(v)))] if v else None
 
 
 def wait_for(pred, timeout):
@@ -55,7 +51,7 @@ def main(bin_dir, launch, params, mode, scans, out):
     dp = DomainParticipant(0)
     reliable = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(10))
     events = DataReader(dp, Topic(dp, "rt/scan/events", ScanEvent), qos=reliable)
-    meshes = DataReader(dp, Topic(dp, "rt/surface/cloud", PointCloud2), qos=Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(1)))
+    surfaces = DataReader(dp, Topic(dp, "rt/surface/cloud", PointCloud2), qos=Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(1)))
     request = DataWriter(dp, Topic(dp, "rt/scan/request", ScanEvent), qos=reliable)
     args = [str(pathlib.Path(bin_dir) / "xsurf"), "launch", launch, f"params:={params}"]
     if mode == "composed":
@@ -78,7 +74,7 @@ def main(bin_dir, launch, params, mode, scans, out):
     rows = []
     for k in range(scans):
         events.take(N=100)
-        meshes.take(N=10)
+        surfaces.take(N=10)
         now = time.time()
         start_stamp = now
         request.write(ScanEvent(header=Header(stamp=Time(sec=int(now), nanosec=int((now % 1) * 1e9)), frame_id="table"), scan_id=0, event=START))
@@ -95,28 +91,23 @@ def main(bin_dir, launch, params, mode, scans, out):
             continue
         t_end, scan_id, end_stamp = end
 
-        def mesh():
-            for s in meshes.take(N=10):
+        def surface():
+            for s in surfaces.take(N=10):
                 st = s.header.stamp.sec + s.header.stamp.nanosec * 1e-9 if isinstance(s, PointCloud2) else 0
                 # The merged cloud is stamped with the scan's last frame, before its END.
                 if isinstance(s, PointCloud2) and start_stamp < st <= end_stamp:
                     return (time.time(), s.width * s.height)
             return None
 
-        got = wait_for(mesh, 30)
+        got = wait_for(surface, 30)
         if got is None:
             rows.append({"scan": scan_id, "error": "no /surface/cloud in 30 s after END"})
             continue
-        t_mesh, points = got
-        rows.append({"scan": scan_id, "after_end_received_ms": round((t_mesh - t_end) * 1e3, 1),
-                     "after_end_stamp_ms": round((t_mesh - end_stamp) * 1e3, 1), "points": points})
+        t_surface, points = got
+        rows.append({"scan": scan_id, "after_end_received_ms": round((t_surface - t_end) * 1e3, 1),
+                     "after_end_stamp_ms": round((t_surface - end_stamp) * 1e3, 1), "points": points})
         time.sleep(1.0)
-    proc.send_signal(signal.SIGTERM)
-    try:
-        code = proc.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        code = -9
+    code = stop(proc, 30)
     lat = [r["after_end_received_ms"] for r in rows if "after_end_received_ms" in r]
     lat_stamp = [r["after_end_stamp_ms"] for r in rows if "after_end_stamp_ms" in r]
     print(json.dumps({"mode": mode, "scans": rows, "launch_exit": code,

@@ -14,7 +14,6 @@ usage: soak.py BIN_DIR LAUNCH PARAMS MODE SECONDS FILES OUT [WARMUP]
 import json
 import os
 import pathlib
-import signal
 import subprocess
 import sys
 import time
@@ -27,7 +26,7 @@ from cyclonedds.util import duration
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent / "tests/py"))
-from bench_live_probe import descendants, label  # noqa: E402
+from bench_live_probe import descendants, label, stop  # noqa: E402
 from ros_types import Header, ScanEvent, Time  # noqa: E402
 
 
@@ -83,12 +82,7 @@ def main(bin_dir, launch, params, mode, seconds, files, out, warmup="60"):
             asked += 1
             last_asked_for += 1
         time.sleep(0.2)
-    launcher.send_signal(signal.SIGTERM)
-    try:
-        exit_code = launcher.wait(timeout=60)
-    except subprocess.TimeoutExpired:
-        launcher.kill()
-        exit_code = "killed"
+    exit_code = stop(launcher, 60, killed="killed")
     totals = {"frames_sent": 0, "frames_received": 0, "frames_lost": 0, "frames_lost_in_transport": 0,
               "frames_refused_upstream": 0, "frames_not_sent": 0}
     written, incomplete, missing, cut = 0, 0, 0, 0

@@ -350,9 +350,10 @@ pub trait AnyComponent: Send {
 
 /// `component` with its ports numbered, for a host.
 pub fn boxed<C: Component>(component: C) -> Box<dyn AnyComponent> {
-    let mut p = Numbered { inner: component, inputs: Vec::new(), outputs: Vec::new() };
-    p.number();
-    Box::new(p)
+    // A component's ports are fixed once it is built: listed here, once.
+    let inputs = component.inputs().into_iter().map(|(id, p)| (id, p.type_name)).collect();
+    let outputs = component.outputs().into_iter().map(|(id, _)| id).collect();
+    Box::new(Numbered { inner: component, inputs, outputs })
 }
 
 /// A component with its port names listed by position.
@@ -365,11 +366,6 @@ struct Numbered<C: Component> {
 }
 
 impl<C: Component> Numbered<C> {
-    /// Lists the ports (again: a component's ports are fixed once it is built).
-    fn number(&mut self) {
-        self.inputs = self.inner.inputs().into_iter().map(|(id, p)| (id, p.type_name)).collect();
-        self.outputs = self.inner.outputs().into_iter().map(|(id, _)| id).collect();
-    }
     /// The component's outbox as positions. An output the component never listed (a bug in the
     /// component) is logged and dropped; so is a refusal of an input it never listed.
     fn numbered(&self, typed: Outbox<C::Input, C::Output>, out: &mut Outbox) {
@@ -400,7 +396,6 @@ impl<C: Component> AnyComponent for Numbered<C> {
     }
     fn set_identity(&mut self, name: &str, namespace: &str) {
         self.inner.set_identity(name, namespace);
-        self.number();
     }
     fn reconfigure(&mut self, params: &Params) -> Result<(), ParamError> {
         self.inner.reconfigure(params)

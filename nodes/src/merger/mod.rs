@@ -267,11 +267,13 @@ impl MergerNode {
         }
     }
 
-    /// Writes the last merged scan's files if they are not yet written.
+    /// Writes the last merged scan's files if they are not yet written, and logs its account
+    /// (the cameras missing, without a report, or short of frames) as it stands then.
     fn write_unwritten(&mut self) {
         let Some(u) = self.unwritten.take() else { return };
         let Some((id, merged, meshes)) = self.last_merge.take() else { return };
         let report = self.scan_report(u.scan_id, &u.names);
+        Self::log_account(&report);
         self.write(u.scan_id, &merged, &meshes, &u.refinement, Some(&report));
         self.last_merge = Some((id, merged, meshes));
     }
@@ -286,7 +288,6 @@ impl MergerNode {
         let grids: Vec<(String, Grid)> =
             self.clouds.iter().map(|(&i, (_, g))| (self.cfg.cameras[i].clone(), g.clone())).collect();
         let (names, mut gs): (Vec<String>, Vec<Grid>) = grids.into_iter().unzip();
-        let scan_report = self.scan_report(self.scan_id, &names);
         let (refined, refinement) = self.refine(&names, &mut gs);
         if !refined.is_empty() {
             let placements = TFMessage {
@@ -322,7 +323,6 @@ impl MergerNode {
         out.publish(Output::Cloud, cloud.clone());
         out.publish(Output::Mesh, marker.clone());
         self.last_outputs.set(vec![(Output::Cloud, cloud), (Output::Mesh, marker)]);
-        Self::log_account(&scan_report);
         self.unwritten = Some(Unwritten { scan_id: self.scan_id, names, refinement });
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
@@ -894,6 +894,18 @@ mod tests {
         assert!(m.handle(Input::CameraInfo(1), &Msg::CameraInfo(Arc::new(bad)), &mut out).is_err());
     }
 
+    /// A mesher's report on `/scan/report`: 20 frames received and `lost` lost, and its final
+    /// cloud (stamp, points) if given.
+    fn mesher_report(cam: &str, scan: u32, lost: u64, final_cloud: Option<(&str, u64)>) -> Msg {
+        let mut json = serde_json::json!({"node": "mesher", "camera": cam, "scan_id": scan, "aborted": false,
+            "frames_expected": 20 + lost, "frames_received": 20, "frames_lost": lost, "frames_without_line": 0,
+            "gaps": [], "points_rejected": 0, "profiles_refused": 0});
+        if let Some((stamp, points)) = final_cloud {
+            json["final_cloud"] = serde_json::json!({"stamp": stamp, "points": points});
+        }
+        Msg::Text(Arc::new(StringMsg { data: json.to_string() }))
+    }
+
     /// A camera's grid of `frames` frames of `samples` points on a flat patch at height
     /// 0.02 + `dz`, stamped at `sec`.
     fn flat_cloud(samples: usize, frames: usize, dz: f32, sec: i32) -> Msg {
@@ -934,11 +946,7 @@ mod tests {
             Msg::ScanEvent(Arc::new(e))
         };
         let report = |json: serde_json::Value| Msg::Text(Arc::new(StringMsg { data: json.to_string() }));
-        let mesher = |cam: &str, scan: u32, lost: u64| {
-            report(serde_json::json!({"node": "mesher", "camera": cam, "scan_id": scan, "aborted": false,
-                "frames_expected": 20 + lost, "frames_received": 20, "frames_lost": lost, "frames_without_line": 0,
-                "gaps": [], "points_rejected": 0, "profiles_refused": 0}))
-        };
+        let mesher = |cam: &str, scan: u32, lost: u64| mesher_report(cam, scan, lost, None);
         h.feed("/scan/report", &mesher("cam1", 5, 2))
             .feed("/scan/report", &mesher("cam1", 4, 9))
             .feed("/scan/report", &mesher("cam9", 5, 9))
@@ -976,13 +984,7 @@ mod tests {
             e.header.stamp.sec = sec;
             Msg::ScanEvent(Arc::new(e))
         };
-        let mesher = |cam: &str, scan: u32, stamp: &str, points: u64| {
-            let json = serde_json::json!({"node": "mesher", "camera": cam, "scan_id": scan, "aborted": false,
-                "frames_expected": 20, "frames_received": 20, "frames_lost": 0, "frames_without_line": 0,
-                "gaps": [], "points_rejected": 0, "profiles_refused": 0,
-                "final_cloud": {"stamp": stamp, "points": points}});
-            Msg::Text(Arc::new(StringMsg { data: json.to_string() }))
-        };
+        let mesher = |cam: &str, scan: u32, stamp: &str, points: u64| mesher_report(cam, scan, 0, Some((stamp, points)));
         let dir = std::env::temp_dir().join(format!("xsurf-merger-final-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let mut o = BTreeMap::new();
