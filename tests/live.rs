@@ -325,17 +325,60 @@ fn malformed_messages_from_a_dds_peer_cost_only_themselves() {
     // points per frame. A loaded machine's camera skips a few of a scan's 130 frames (counted
     // in the report), so the merged count moves with where the skips fall and how the two
     // cameras' columns fuse; per camera, a frame's points are the measure.
-    let columns = |scan: usize, c: &str| -> (usize, f64) {
+    let columns = |scan: usize, c: &str| -> (Vec<f64>, f64) {
         let ply = files.join(format!("scan_{scan}/{c}.ply"));
         let m = xsurf_formats::ply::read(&mut std::io::BufReader::new(std::fs::File::open(&ply).unwrap())).unwrap();
         let mut y: Vec<f32> =
             m.positions.iter().filter(|p| p[0].abs() < 0.105 && p[1].abs() < 0.1485).map(|p| p[1]).collect();
         y.sort_by(f32::total_cmp);
-        let cols = if y.is_empty() { 0 } else { 1 + y.windows(2).filter(|w| w[1] - w[0] > 0.0008).count() };
-        (cols, y.len() as f64 / cols.max(1) as f64)
+        let mut cols: Vec<f64> = Vec::new();
+        for (i, &v) in y.iter().enumerate() {
+            if i == 0 || v - y[i - 1] > 0.0008 {
+                cols.push(f64::from(v));
+            }
+        }
+        let per_frame = y.len() as f64 / cols.len().max(1) as f64;
+        (cols, per_frame)
+    };
+    // The frames absent from a camera's columns over the base: a gap of about k frame
+    // spacings between neighbouring columns is k - 1 frames, and more than one and a half
+    // spacings between the base's edge and the first or last column is one frame at least.
+    // A frame's travel is its stamp's, and a loaded machine's timer puts the stamps some
+    // milliseconds early or late: a count of the columns against the base's length over the
+    // mean spacing comes out one short when the first frame falls just outside the base.
+    let absent = |cols: &[f64], spacing: f64| -> u64 {
+        let (Some(first), Some(last)) = (cols.first(), cols.last()) else {
+            return (0.297 / spacing).floor() as u64;
+        };
+        let inside: u64 = cols.windows(2).map(|w| ((w[1] - w[0]) / spacing).round().max(1.0) as u64 - 1).sum();
+        let end = |d: f64| (d / spacing - 0.5).floor().max(0.0) as u64;
+        inside + end(first + 0.1485) + end(0.1485 - last)
     };
     let report = |k: usize| -> serde_json::Value {
         serde_json::from_slice(&std::fs::read(files.join(format!("scan_{k}/scan_report.json"))).unwrap()).unwrap()
+    };
+    // A camera's frames that its scan's report counts as not taken (not sent, lost or
+    // refused), and the travel between its frames.
+    let missing = |a: &serde_json::Value| -> (u64, f64) {
+        let n = a["frames_lost"].as_u64().unwrap().max(
+            a["frames_not_sent"].as_u64().unwrap()
+                + a["frames_lost_in_transport"].as_u64().unwrap()
+                + a["frames_refused_upstream"].as_u64().unwrap(),
+        );
+        (n, 0.035 * a["frame_period_s"].as_f64().unwrap())
+    };
+    // The share of a scan's frames over the base not taken, summed over its cameras.
+    let not_taken = |k: usize| -> f64 {
+        let r = report(k);
+        r["cameras"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|a| {
+                let (n, spacing) = missing(a);
+                n as f64 * spacing / 0.297
+            })
+            .sum()
     };
     let (clean_cover, clean) = over_base(1);
     assert!(clean > 5_000 && clean_cover > 0.97, "{clean} points, {clean_cover} covered");
@@ -349,27 +392,31 @@ fn malformed_messages_from_a_dds_peer_cost_only_themselves() {
             100.0 * clean_cover
         );
         // The merged surface equal within 1 % (its coverage of the base) and its points within
-        // 3 % (a lost camera costs some 6 %, and fails the per-camera checks by far).
+        // 3 % (a lost camera costs some 6 %, and fails the per-camera checks by far), more by
+        // the share of the frames over the base that the reports of this scan and the clean
+        // one count as not taken (a loaded machine's cameras skip frames, and say so).
         assert!(
             (cover - clean_cover).abs() <= 0.01,
             "scan {k}: {cover} of the base covered, the clean scan {clean_cover}"
         );
-        assert!((n as f64 / clean as f64 - 1.0).abs() <= 0.03, "scan {k}: {n} merged points, the clean scan {clean}");
+        let slack = 0.03 + not_taken(1) + not_taken(k);
+        assert!(
+            (n as f64 / clean as f64 - 1.0).abs() <= slack,
+            "scan {k}: {n} merged points, the clean scan {clean} (within {slack})"
+        );
         for (i, c) in ["cam1", "cam2"].into_iter().enumerate() {
             let a = r["cameras"].as_array().unwrap().iter().find(|x| x["camera"] == c).cloned().unwrap_or_default();
             let (cols, per_frame) = columns(k, c);
+            let (missing, spacing) = missing(&a);
+            let (absent, cols) = (absent(&cols, spacing), cols.len());
             // Frames over the base: its length over the travel between frames, less those the
             // report counts as not sent, lost or refused. Each holds the clean scan's points.
-            let spacing = 0.035 * a["frame_period_s"].as_f64().unwrap();
-            let missing = a["frames_lost"].as_u64().unwrap().max(
-                a["frames_not_sent"].as_u64().unwrap()
-                    + a["frames_lost_in_transport"].as_u64().unwrap()
-                    + a["frames_refused_upstream"].as_u64().unwrap(),
+            eprintln!(
+                "  {c}: {cols} frames over the base ({absent} absent, {missing} not taken), {per_frame:.2} points each"
             );
-            eprintln!("  {c}: {cols} frames over the base ({missing} not taken), {per_frame:.2} points each");
             assert!(
-                cols as u64 + missing >= (0.297 / spacing).floor() as u64,
-                "scan {k} {c}: {cols} frames over the base, {missing} missing, {spacing} m apart: {a}"
+                absent <= missing,
+                "scan {k} {c}: {cols} frames over the base, {absent} absent, {missing} missing, {spacing} m apart: {a}"
             );
             assert!(
                 (per_frame / clean_per_frame[i] - 1.0).abs() <= 0.01,
