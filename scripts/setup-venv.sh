@@ -2,7 +2,9 @@
 # Installs the independent checkers the tests use, each from its own registry:
 #  - .venv: rosbags, mcap-ros2-support, trimesh, cyclonedds, pydicom (PyPI);
 #  - tests/gltf/node_modules: the Khronos glTF validator (npm);
-#  - .venv/bin/vrml_check: a VRML 2.0 reader built on Coin3D (Debian's libcoin-dev).
+#  - .venv/bin/vrml_check: a VRML 2.0 reader built on Coin3D (Debian's libcoin-dev);
+#  - Orthanc, dcmtk and dicom3tools (Debian's orthanc, dcmtk, dicom3tools): a PACS, its DICOM peers
+#    and a validator for the PACS tests.
 # Idempotent: each part is redone only when its inputs change.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -26,6 +28,18 @@ if ! [[ -x .venv/bin/vrml_check && .venv/bin/vrml_check -nt tests/vrml/vrml_chec
     fi
   fi
   g++ -O1 -o .venv/bin/vrml_check tests/vrml/vrml_check.cpp -lCoin
+fi
+# The PACS tests: Orthanc (a real PACS), dcmtk (findscu, getscu) and dicom3tools (dciodvfy).
+if ! command -v Orthanc >/dev/null || ! command -v getscu >/dev/null || ! command -v dciodvfy >/dev/null; then
+  if [[ $(id -u) -eq 0 ]]; then
+    apt-get update -qq >/dev/null
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends orthanc dcmtk dicom3tools >/dev/null
+    # The package starts a system Orthanc on the standard ports; the tests start their own.
+    (command -v systemctl >/dev/null && systemctl stop orthanc 2>/dev/null) || service orthanc stop >/dev/null 2>&1 || true
+  else
+    echo "setup: orthanc, dcmtk and dicom3tools are needed for the PACS tests: sudo apt-get install orthanc dcmtk dicom3tools" >&2
+    exit 1
+  fi
 fi
 # nftables: the two-host test's packet loss on its veth link (this kernel has no netem).
 if ! command -v nft >/dev/null; then

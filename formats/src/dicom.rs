@@ -10,7 +10,7 @@
 //! Writing produces a Digital X-Ray Image (for presentation) in Explicit VR Little Endian,
 //! with the acquisition geometry and timing that [`XrayInfo`] holds.
 
-use dicom_core::value::{PrimitiveValue, C};
+use dicom_core::value::{DataSetSequence, PrimitiveValue, C};
 use dicom_core::{DataElement, Tag, VR};
 use dicom_dictionary_std::tags;
 use dicom_encoding::TransferSyntaxIndex;
@@ -55,7 +55,7 @@ pub struct XrayFile {
     pub transfer_syntax: String,
 }
 
-fn name_of(tag: Tag) -> String {
+pub(crate) fn name_of(tag: Tag) -> String {
     use dicom_core::dictionary::DataDictionary;
     let name = dicom_dictionary_std::StandardDataDictionary
         .by_tag(tag)
@@ -407,8 +407,13 @@ fn xray_info(obj: &InMemDicomObject) -> XrayInfo {
     }
 }
 
-/// Reads the radiograph in `path`.
-pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
+/// Opens the DICOM file `path` after checking that it is one and that every length in it fits
+/// in the file; the error names the file and what is wrong.
+pub(crate) fn open_checked(path: &Path) -> Result<dicom_object::DefaultDicomObject, DicomError> {
+    Ok(open_bytes(path)?.0)
+}
+
+fn open_bytes(path: &Path) -> Result<(dicom_object::DefaultDicomObject, usize), DicomError> {
     let err = |what: String| DicomError { file: path.to_path_buf(), what };
     if let Some(why) = crate::file_problem(path) {
         return Err(err(why));
@@ -417,11 +422,41 @@ pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
     let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
     check_lengths(&bytes).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;
     let obj = OpenFileOptions::new().open_file(path).map_err(|e| err(format!("not a readable DICOM file: {e}")))?;
+    Ok((obj, bytes.len()))
+}
+
+/// Checks a UID (PS3.5 9.1): at most 64 characters, components of digits separated by single
+/// dots, none with a leading zero (but "0" itself); the error says what is wrong.
+pub fn check_uid(s: &str) -> Result<(), String> {
+    if s.is_empty() {
+        return Err("empty".into());
+    }
+    if s.len() > 64 {
+        return Err(format!("{} characters, at most 64", s.len()));
+    }
+    for c in s.split('.') {
+        if c.is_empty() {
+            return Err("an empty component".into());
+        }
+        if !c.bytes().all(|b| b.is_ascii_digit()) {
+            return Err(format!("component {c:?} is not digits"));
+        }
+        if c.len() > 1 && c.starts_with('0') {
+            return Err(format!("component {c:?} has a leading zero"));
+        }
+    }
+    Ok(())
+}
+
+/// Reads the radiograph in `path`.
+pub fn read_file(path: &Path) -> Result<XrayFile, DicomError> {
+    let err = |what: String| DicomError { file: path.to_path_buf(), what };
+    let (obj, len) = open_bytes(path)?;
     let ts_uid = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']).to_string();
     let ts = TransferSyntaxRegistry
         .get(&ts_uid)
         .ok_or_else(|| err(format!("TransferSyntaxUID (0002,0010) {ts_uid} is unknown")))?;
-    let format = pixel_format(&obj, ts.is_encapsulated_pixel_data(), bytes.len()).map_err(err)?;
+    let format = pixel_format(&obj, ts.is_encapsulated_pixel_data(), len).map_err(err)?;
     if ts.is_encapsulated_pixel_data() && !ts.can_decode_all() {
         return Err(err(format!(
             "{}: transfer syntax {ts_uid} ({}) is not supported (supported: uncompressed, deflate, RLE, JPEG baseline/extended/lossless)",
@@ -499,7 +534,7 @@ pub fn format_datetime(ns: i64) -> String {
 }
 
 /// A UID under the `2.25` root (ISO/IEC 9834-8: a 128-bit number in decimal) derived from `key`.
-fn uid(key: &str) -> String {
+pub(crate) fn uid(key: &str) -> String {
     // Two FNV-1a 64-bit hashes with different bases make the 128 bits.
     let fnv = |basis: u64| key.bytes().fold(basis, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
     let v = (u128::from(fnv(0xcbf2_9ce4_8422_2325)) << 64) | u128::from(fnv(0x6c62_272e_07bb_0142));
@@ -510,6 +545,43 @@ fn uid(key: &str) -> String {
 const DX_FOR_PRESENTATION: &str = "1.2.840.10008.5.1.4.1.1.1.1";
 /// Explicit VR Little Endian.
 const EXPLICIT_VR_LE: &str = "1.2.840.10008.1.2.1";
+
+/// The attributes a Digital X-Ray image needs beyond the pixels and the rescale (types 1 and 2
+/// of its Patient, General Study, General Series, General Image, DX Anatomy Imaged, DX Image,
+/// DX Detector and Acquisition Context modules; dciodvfy checks them).
+fn dx_attributes(monochrome1: bool) -> Vec<DataElement<InMemDicomObject>> {
+    let s = |tag, vr, v: &str| DataElement::new(tag, vr, PrimitiveValue::from(v));
+    vec![
+        DataElement::new(tags::PATIENT_BIRTH_DATE, VR::DA, PrimitiveValue::Empty),
+        DataElement::new(tags::PATIENT_SEX, VR::CS, PrimitiveValue::Empty),
+        DataElement::new(tags::REFERRING_PHYSICIAN_NAME, VR::PN, PrimitiveValue::Empty),
+        s(tags::STUDY_ID, VR::SH, "1"),
+        DataElement::new(tags::ACCESSION_NUMBER, VR::SH, PrimitiveValue::Empty),
+        s(tags::SERIES_NUMBER, VR::IS, "1"),
+        s(tags::INSTANCE_NUMBER, VR::IS, "1"),
+        // The whole body, front to back: rows run from the patient's right to left, columns
+        // from head to feet; the body is not a paired structure (Image Laterality U).
+        s(tags::PATIENT_ORIENTATION, VR::CS, "L\\F"),
+        s(tags::IMAGE_LATERALITY, VR::CS, "U"),
+        DataElement::new(
+            tags::ANATOMIC_REGION_SEQUENCE,
+            VR::SQ,
+            DataSetSequence::from(vec![InMemDicomObject::from_element_iter([
+                s(tags::CODE_VALUE, VR::SH, "38266002"),
+                s(tags::CODING_SCHEME_DESIGNATOR, VR::SH, "SCT"),
+                s(tags::CODE_MEANING, VR::LO, "Entire body"),
+            ])]),
+        ),
+        s(tags::PRESENTATION_LUT_SHAPE, VR::CS, if monochrome1 { "INVERSE" } else { "IDENTITY" }),
+        s(tags::BURNED_IN_ANNOTATION, VR::CS, "NO"),
+        s(tags::DETECTOR_TYPE, VR::CS, "SCINTILLATOR"),
+        DataElement::new(
+            tags::ACQUISITION_CONTEXT_SEQUENCE,
+            VR::SQ,
+            DataSetSequence::<InMemDicomObject>::from(Vec::new()),
+        ),
+    ]
+}
 
 /// Writes `image` as a DICOM Digital X-Ray file (Explicit VR Little Endian, 16 bits allocated),
 /// atomically. `key` makes the UIDs (the same key gives the same UIDs).
@@ -557,6 +629,7 @@ pub fn write_file(path: &Path, image: &Radiograph, info: &XrayInfo, key: &str) -
         s(tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "00"),
         DataElement::new(tags::PIXEL_DATA, VR::OW, PrimitiveValue::U16(C::from_vec(image.pixels.clone()))),
     ];
+    els.extend(dx_attributes(image.monochrome1));
     if let Some(w) = image.window {
         els.push(ds(tags::WINDOW_CENTER, w.center));
         els.push(ds(tags::WINDOW_WIDTH, w.width));

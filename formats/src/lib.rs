@@ -11,6 +11,7 @@ pub mod bag;
 pub mod calibration;
 pub mod compressed;
 pub mod dicom;
+pub mod dicom_surface;
 pub mod frames;
 pub mod gltf;
 pub mod image;

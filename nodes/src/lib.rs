@@ -13,6 +13,7 @@ pub mod convert;
 pub mod host;
 pub mod launch;
 pub mod offline;
+pub mod pacs;
 pub mod param_client;
 pub mod play;
 pub mod record;

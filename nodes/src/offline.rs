@@ -184,6 +184,8 @@ const OUTPUT_FILES: &[&str] = &[
     "xray.png",
     "xray.json",
     "surface.dcm",
+    "points.dcm",
+    "xray.dcm",
     "refinement.json",
     "scan_report.json",
     "report.json",
@@ -401,7 +403,14 @@ fn build_graph(topics: &BagTopics, ros: &RosArgs, opts: &Options) -> anyhow::Res
         Some(v) => bail!("parameter /merger cameras: {v:?} is not a list of camera names"),
     };
     let cams_param = ParamValue::StringArray(merged_cameras);
-    router.add(build("merger", "/", &[("output_dir", out_dir), ("cameras", cams_param)])?, "merger", "/", &ros.remaps);
+    // The merger writes the DICOM files (the radiograph's patient and study with --xray); the
+    // PACS is sent to by the command itself, after the files are complete.
+    let mut merger =
+        vec![("output_dir", out_dir), ("cameras", cams_param), ("pacs", ParamValue::String(String::new()))];
+    if let (Some(x), None) = (&opts.xray, &xray_error) {
+        merger.push(("dicom_file", ParamValue::String(x.to_string_lossy().into_owned())));
+    }
+    router.add(build("merger", "/", &merger)?, "merger", "/", &ros.remaps);
     Ok((router, xray_error))
 }
 

@@ -4,7 +4,8 @@
 //! ```text
 //! xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S] [--preset ideal|hard] [--encoding E]
 //! xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding E] [--seed N] [--preset ideal|hard] [--zstd]
-//! xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
+//! xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] [--pacs AET@HOST:PORT] --out DIR
+//! xsurf pacs echo AET@HOST:PORT | send FILE|DIR AET@HOST:PORT [--ae-title T]
 //! xsurf bag info DIR
 //! xsurf bag reindex DIR [--force]
 //! xsurf bag record -o DIR [TOPIC... | --all] [--zstd] [--split-by-scan] [--duration S]
@@ -37,8 +38,14 @@ const USAGE: &str = "usage:
       sphere, cylinder, box, body); with --compressed the cameras are sensor_msgs/CompressedImage on
       /<cam>/image_raw/compressed (JPEG quality default 90); with --frames N, N frames per camera as PGM files
       instead (DIR/<camera>/; JPEG or PNG files with --compressed)
-  xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] --out DIR
-      reconstruct a recorded scan offline: DIR/<cam>.ply, merged.ply, scene.wrl, scene.glb, report.json
+  xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] [--pacs AET@HOST:PORT] --out DIR
+      reconstruct a recorded scan offline: DIR/<cam>.ply, merged.ply, scene.wrl, scene.glb, surface.dcm,
+      report.json; with --pacs the DICOM files go to the PACS (queued in DIR/pacs_queue if it does not take them)
+  xsurf pacs echo AET@HOST:PORT [--ae-title T]
+      DICOM C-ECHO: does the PACS answer us?
+  xsurf pacs send FILE|DIR AET@HOST:PORT [--ae-title T]
+      DICOM C-STORE of a file, or of every .dcm file under a folder; a PACS queue folder (pacs_queue)
+      is emptied, each scan removed once stored
   xsurf bag info DIR
       summarize a bag, like `ros2 bag info`
   xsurf bag reindex DIR [--force]
@@ -98,10 +105,23 @@ example: xsurf synth phantom -o /tmp/phantom-bag --preset hard --zstd"),
   BAG                a rosbag2 folder (MCAP): images or compressed images, camera_info, /tf, /tf_static
   --out DIR          where the surfaces go; an earlier reconstruction's own files there are replaced
   --params-file FILE the nodes' parameters (ROS 2 YAML, as for `ros2 run --params-file`)
-  --xray FILE.dcm    the radiograph to place under the surface
+  --xray FILE.dcm    the radiograph to place under the surface; surface.dcm joins its patient and study
+  --pacs AET@HOST:PORT  send the DICOM files (surface.dcm, xray.dcm) to this PACS; what it does not
+                     take waits in DIR/pacs_queue (exit 1), for `xsurf pacs send DIR/pacs_queue ADDR`
+  --ae-title T       our AE title towards the PACS (default XSURF)
   --quiet            no progress
 exit codes: 0 done, 1 failed, 2 usage, 3 files written but the result is incomplete (see report.json)
 example: xsurf reconstruct /tmp/phantom-bag --xray /tmp/phantom-bag/xray.dcm --out /tmp/phantom"),
+    ("pacs echo", "options:
+  AET@HOST:PORT      the PACS: its AE title, host and port (DICOM's standard port is 104)
+  --ae-title T       our AE title (default XSURF)
+example: xsurf pacs echo ORTHANC@127.0.0.1:4242"),
+    ("pacs send", "options:
+  FILE|DIR           a DICOM file, a folder (every .dcm file under it), or a PACS queue folder
+                     (each scan in it removed once the PACS has stored it)
+  AET@HOST:PORT      the PACS                         --ae-title T   our AE title (default XSURF)
+exit codes: 0 every file stored, 1 not (what failed, naming the PACS, the SOP class and the status)
+example: xsurf pacs send /data/scans/pacs_queue ORTHANC@127.0.0.1:4242"),
     ("bag info", "example: xsurf bag info /tmp/phantom-bag"),
     ("bag reindex", "options:
   DIR                a folder of <name>_<N>.mcap files (split files of a killed recorder, say)
@@ -369,8 +389,21 @@ fn write_frames(
 fn cmd_reconstruct(args: &[String]) -> anyhow::Result<()> {
     let a = Args::parse(
         args,
-        &Syntax { flags: &["--quiet"], valued: &["--params-file", "--xray", "--out", "-o"], group: None },
+        &Syntax {
+            flags: &["--quiet"],
+            valued: &["--params-file", "--xray", "--out", "-o", "--pacs", "--ae-title"],
+            group: None,
+        },
     )?;
+    let pacs = match a.get("--pacs") {
+        Some(addr) => {
+            let peer: crate::pacs::Peer = addr.parse().map_err(|e| usage(format!("--pacs {e}")))?;
+            let client = crate::pacs::Client::new(a.get("--ae-title").unwrap_or("XSURF"))
+                .map_err(|e| usage(format!("--ae-title: {e}")))?;
+            Some((peer, client))
+        }
+        None => None,
+    };
     let [bag] = a.positional.as_slice() else { return Err(usage("reconstruct needs one BAG")) };
     let out = a.get("--out").or(a.get("-o")).ok_or_else(|| usage("reconstruct needs --out DIR"))?;
     let opts = offline::Options {
@@ -383,6 +416,9 @@ fn cmd_reconstruct(args: &[String]) -> anyhow::Result<()> {
     };
     let r = offline::reconstruct(&opts)?;
     print_report(&r, out);
+    if let Some((peer, client)) = &pacs {
+        send_scans(Path::new(out), peer, client)?;
+    }
     let own = opts.bag.join(synth::XRAY_FILE);
     if opts.xray.is_none() && own.is_file() {
         println!(
@@ -395,6 +431,99 @@ fn cmd_reconstruct(args: &[String]) -> anyhow::Result<()> {
         return Err(anyhow!(Incomplete(problems)));
     }
     Ok(())
+}
+
+/// Queues the DICOM files of a reconstruction in `out` (one entry per scan folder, or `out`
+/// itself for one scan) in `out/pacs_queue`, then sends the queue to `peer`.
+fn send_scans(out: &Path, peer: &crate::pacs::Peer, client: &crate::pacs::Client) -> anyhow::Result<()> {
+    let queue = crate::pacs::Queue::open(&out.join("pacs_queue"))?;
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(out)?
+        .filter_map(Result::ok)
+        .filter(|e| e.file_name().to_string_lossy().starts_with("scan_") && e.path().is_dir())
+        .map(|e| e.path())
+        .collect();
+    dirs.sort();
+    if dirs.is_empty() {
+        dirs.push(out.to_path_buf());
+    }
+    let stamp = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0);
+    for d in &dirs {
+        let files: Vec<PathBuf> = std::fs::read_dir(d)?
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .filter(|p| p.is_file() && p.extension().is_some_and(|x| x == "dcm"))
+            .collect();
+        if files.is_empty() {
+            continue;
+        }
+        let name = d.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        queue.enqueue(&format!("{stamp:020}-{name}"), &files)?;
+    }
+    send_queue(&queue, peer, client)
+}
+
+/// Sends every entry of `queue` to `peer`, oldest first; the first failure stops it, and what
+/// is not sent stays queued.
+fn send_queue(
+    queue: &crate::pacs::Queue,
+    peer: &crate::pacs::Peer,
+    client: &crate::pacs::Client,
+) -> anyhow::Result<()> {
+    for entry in queue.entries() {
+        match queue.send(client, peer, &entry) {
+            Ok(stored) => println!(
+                "pacs: {} stored in {peer}: {}",
+                entry.file_name().unwrap_or_default().to_string_lossy(),
+                stored
+                    .iter()
+                    .map(|s| s.file.file_name().unwrap_or_default().to_string_lossy())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            Err(e) => {
+                return Err(anyhow!(
+                    "{e}\n  not sent: {} scan(s) wait in {} (`xsurf pacs send {} {peer}` sends them)",
+                    queue.entries().len(),
+                    queue.dir().display(),
+                    queue.dir().display()
+                ))
+            }
+        }
+    }
+    Ok(())
+}
+
+fn cmd_pacs(args: &[String]) -> anyhow::Result<()> {
+    let a = Args::parse(args, &Syntax { flags: &[], valued: &["--ae-title"], group: None })?;
+    let client = crate::pacs::Client::new(a.get("--ae-title").unwrap_or("XSURF"))
+        .map_err(|e| usage(format!("--ae-title: {e}")))?;
+    let peer = |s: &str| -> anyhow::Result<crate::pacs::Peer> { s.parse().map_err(|e: String| usage(e)) };
+    match a.positional.iter().map(String::as_str).collect::<Vec<_>>().as_slice() {
+        ["echo", addr] => {
+            let p = peer(addr)?;
+            crate::pacs::echo(&client, &p)?;
+            println!("pacs: {p} answers C-ECHO (calling AE {})", client.calling);
+            Ok(())
+        }
+        ["send", path, addr] => {
+            let p = peer(addr)?;
+            let path = Path::new(path);
+            if let Some(why) = xsurf_formats::file_problem(path).filter(|_| !path.is_dir()) {
+                return Err(anyhow!("{}: {why}", path.display()));
+            }
+            if crate::pacs::Queue::is_queue(path) {
+                return send_queue(&crate::pacs::Queue::open(path)?, &p, &client);
+            }
+            let files = crate::pacs::dicom_files(path);
+            if files.is_empty() {
+                return Err(anyhow!("{}: no .dcm file to send", path.display()));
+            }
+            let stored = crate::pacs::store(&client, &p, &files)?;
+            println!("pacs: {} file(s) stored in {p}", stored.len());
+            Ok(())
+        }
+        _ => Err(usage("pacs echo AET@HOST:PORT | pacs send FILE|DIR AET@HOST:PORT")),
+    }
 }
 
 /// The reconstruction ran but its input was partly bad: exit code 3, outputs kept.
@@ -681,6 +810,7 @@ pub fn main() -> ExitCode {
         Some("synth") => cmd_synth(&args[1..]),
         Some("reconstruct") => cmd_reconstruct(&args[1..]),
         Some("bag") => cmd_bag(&args[1..]),
+        Some("pacs") => cmd_pacs(&args[1..]),
         Some("param") => crate::param_client::run(&args[1..]),
         Some("calibrate") => calibrate::run(&args[1..]),
         Some("-h" | "--help" | "help") => {

@@ -21,6 +21,7 @@
 //! and `preview.png`, with `xray.png` beside them; one that arrives after the merge (a
 //! radiograph loaded later) rewrites that scan's scene files.
 
+mod dicom;
 mod params;
 pub use params::*;
 
@@ -63,11 +64,14 @@ struct Config {
     table_frame: String,
     carm_frame: String,
     republish_ns: Option<i64>,
+    dicom: dicom::DicomConfig,
+    /// The PACS, our side of it and the queue's folder.
+    pacs: Option<dicom::PacsConfig>,
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
     let p = MergerParams::from_params(p)?;
-    let cameras = p.cameras;
+    let cameras = p.cameras.clone();
     if cameras.is_empty() || cameras.iter().any(|c| c.is_empty() || c.contains(char::is_whitespace)) {
         return Err(Params::invalid("cameras", format!("{cameras:?}: needs one or more camera names")));
     }
@@ -89,7 +93,10 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         max_rms_m: positive("refine_max_rms_m", p.refine_max_rms_m)?,
         ..RefineConfig::default()
     };
+    let (dicom, pacs) = dicom::config(&p)?;
     Ok(Config {
+        dicom,
+        pacs,
         refine: p.refine.then_some((refine_cfg, plane)),
         save_rig_file: p.save_rig_file,
         cameras,
@@ -164,11 +171,20 @@ pub struct MergerNode {
     /// its surface has been published (a merge on the last final cloud puts the surface on the
     /// wire first), with its account as it stands then.
     unwritten: Option<Unwritten>,
+    /// The current scan's END stamp.
+    scan_end_ns: Option<i64>,
+    /// The PACS queue and its sender, with `pacs`.
+    pacs: Option<(crate::pacs::Queue, crate::pacs::Sender)>,
+    /// Scans whose DICOM files were written.
+    dicom_scans: u64,
+    /// Scans put in the PACS queue.
+    pacs_queued: u64,
 }
 
 /// A merged scan's files still to write (its meshes are the last merge's).
 struct Unwritten {
-    scan_id: u32,
+    /// The scan: id, START and END.
+    span: dicom::ScanSpan,
     /// The cameras in the surface.
     names: Vec<String>,
     refinement: Vec<Record>,
@@ -212,7 +228,36 @@ impl MergerNode {
             motion: None,
             last_outputs: crate::republish::Republisher::default(),
             unwritten: None,
-        })
+            scan_end_ns: None,
+            pacs: None,
+            dicom_scans: 0,
+            pacs_queued: 0,
+        }
+        .with_pacs())
+    }
+
+    fn with_pacs(mut self) -> Self {
+        self.start_pacs();
+        self
+    }
+
+    /// Starts the PACS sender the configuration asks for (what is queued goes first); a queue
+    /// that cannot be made is logged, and the scans' files stay in their folders.
+    fn start_pacs(&mut self) {
+        self.pacs = None;
+        self.pacs = self.cfg.pacs.as_ref().and_then(|(peer, client, dir)| match crate::pacs::Queue::open(dir) {
+            Ok(q) => {
+                let waiting = q.entries().len();
+                if waiting > 0 {
+                    log::info!("merger: {waiting} scan(s) waiting in {} for the PACS {peer}", dir.display());
+                }
+                Some((q.clone(), crate::pacs::Sender::spawn(q, client.clone(), peer.clone())))
+            }
+            Err(e) => {
+                log::error!("merger: no PACS queue: {e:#}");
+                None
+            }
+        });
     }
 
     /// Decodes camera `i`'s cloud and checks it against the camera and the scan: a cloud whose
@@ -272,9 +317,9 @@ impl MergerNode {
     fn write_unwritten(&mut self) {
         let Some(u) = self.unwritten.take() else { return };
         let Some((id, merged, meshes)) = self.last_merge.take() else { return };
-        let report = self.scan_report(u.scan_id, &u.names);
+        let report = self.scan_report(u.span.scan_id, &u.names);
         Self::log_account(&report);
-        self.write(u.scan_id, &merged, &meshes, &u.refinement, Some(&report));
+        self.write(u.span.scan_id, &merged, &meshes, &u.refinement, Some((&report, u.span)));
         self.last_merge = Some((id, merged, meshes));
     }
 
@@ -323,7 +368,10 @@ impl MergerNode {
         out.publish(Output::Cloud, cloud.clone());
         out.publish(Output::Mesh, marker.clone());
         self.last_outputs.set(vec![(Output::Cloud, cloud), (Output::Mesh, marker)]);
-        self.unwritten = Some(Unwritten { scan_id: self.scan_id, names, refinement });
+        let start_ns = self.scan_start_ns.unwrap_or(stamp);
+        let end_ns = self.scan_end_ns.filter(|&e| e >= start_ns).unwrap_or(stamp);
+        let span = dicom::ScanSpan { scan_id: self.scan_id, start_ns, end_ns };
+        self.unwritten = Some(Unwritten { span, names, refinement });
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
             self.scan_id,
@@ -465,20 +513,41 @@ impl MergerNode {
         merged: &Mesh,
         meshes: &[(String, Mesh)],
         refinement: &[Record],
-        scan_report: Option<&ScanReport>,
+        first: Option<(&ScanReport, dicom::ScanSpan)>,
     ) {
         let Some(out) = self.cfg.output_dir.clone() else { return };
         let dir = out.join(format!("scan_{scan_id}"));
-        if let Some(report) = scan_report {
+        if let Some((report, _)) = first {
             self.write_report(scan_id, report);
         }
         let plane = self.overlays.get(&scan_id);
         if let Err(e) = write_files(&dir, merged, meshes, plane, self.cfg.transparency) {
             self.write_failed(format!("cannot write files in {}: {e}", dir.display()));
         }
+        if let Some((_, span)) = first.filter(|_| !merged.triangles.is_empty()) {
+            self.write_dicom(&dir, span, merged);
+        }
         if !refinement.is_empty() {
             let file = RefinementFile { scan_id, cameras: refinement.to_vec() };
             self.write_json(&dir, "refinement.json", &serde_json::to_value(file).unwrap_or_default());
+        }
+    }
+
+    /// Writes the scan's DICOM files (see `dicom.rs`) and queues them for the PACS.
+    fn write_dicom(&mut self, dir: &std::path::Path, span: dicom::ScanSpan, merged: &Mesh) {
+        let files = match dicom::write_scan(&self.cfg.dicom, dir, span, merged) {
+            Ok(f) => f,
+            Err(e) => return self.write_failed(e),
+        };
+        self.dicom_scans += 1;
+        let Some((queue, sender)) = &self.pacs else { return };
+        let name = format!("{:020}-scan_{}", span.start_ns.max(0), span.scan_id);
+        match queue.enqueue(&name, &files) {
+            Ok(_) => {
+                self.pacs_queued += 1;
+                sender.wake();
+            }
+            Err(e) => self.write_failed(format!("scan {}: not queued for the PACS: {e:#}", span.scan_id)),
         }
     }
 
@@ -540,7 +609,7 @@ impl MergerNode {
             self.overlays.pop_first();
         }
         // A merged scan whose files are still to write takes it then.
-        let unwritten = self.unwritten.as_ref().is_some_and(|u| u.scan_id == scan_id);
+        let unwritten = self.unwritten.as_ref().is_some_and(|u| u.span.scan_id == scan_id);
         if unwritten {
             return Ok(());
         }
@@ -697,7 +766,13 @@ impl Component for MergerNode {
         if (&c.table_frame, &c.carm_frame) != (&self.cfg.table_frame, &self.cfg.carm_frame) {
             return Err(Params::invalid("carm_frame", "the frames cannot change while running (restart the node)"));
         }
+        let pacs_changed = c.pacs.as_ref().map(|(p, cl, d)| (p, &cl.calling, d))
+            != self.cfg.pacs.as_ref().map(|(p, cl, d)| (p, &cl.calling, d));
         self.cfg = c;
+        if pacs_changed {
+            // The old sender ends after its current attempt; what it had not sent stays queued.
+            self.start_pacs();
+        }
         Ok(())
     }
     fn handle(&mut self, input: Input, msg: &Msg, out: &mut Out) -> Result<(), NodeError> {
@@ -714,7 +789,7 @@ impl Component for MergerNode {
                 let scan = r.scan_id();
                 let merged = self.last_merged().filter(|(id, _)| *id == scan);
                 self.keep_report(r);
-                let unwritten = self.unwritten.as_ref().is_some_and(|u| u.scan_id == scan);
+                let unwritten = self.unwritten.as_ref().is_some_and(|u| u.span.scan_id == scan);
                 match merged {
                     // Its files are still to write, with the account as it stands then.
                     Some(_) if unwritten => {}
@@ -750,10 +825,12 @@ impl Component for MergerNode {
                         self.motion = None;
                         self.scan_id = e.scan_id;
                         self.scan_start_ns = Some(e.header.stamp.nanos());
+                        self.scan_end_ns = None;
                         self.reports.retain(|(scan, _), _| *scan == e.scan_id);
                     }
                     ScanEvent::END => {
                         self.scan_id = e.scan_id;
+                        self.scan_end_ns = Some(e.header.stamp.nanos());
                         self.pending_deadline = Some(e.header.stamp.nanos() + self.cfg.delay_ns);
                         self.merge_if_complete(out);
                     }
@@ -818,6 +895,13 @@ impl Component for MergerNode {
             ("refinements_refused", self.refinements_refused),
             ("seam_triangles", self.seam_triangles),
             ("write_errors", self.write_errors),
+            ("dicom_scans", self.dicom_scans),
+            ("pacs_queued", self.pacs_queued),
+            ("pacs_sent", self.pacs.as_ref().map_or(0, |(_, s)| s.counts().sent.load(std::sync::atomic::Ordering::Relaxed))),
+            (
+                "pacs_failures",
+                self.pacs.as_ref().map_or(0, |(_, s)| s.counts().failures.load(std::sync::atomic::Ordering::Relaxed)),
+            ),
         ]
     }
 }

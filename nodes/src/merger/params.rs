@@ -58,6 +58,31 @@ xsurf_runtime::parameters! {
         /// the merged cloud and mesh are published again this often until the next scan, for
         /// viewers that join late or lose them (best effort) (0: once)
         republish_s: f64 = 2.0, unit "s", range 0.0..=3600.0;
+        /// the radiograph's DICOM file: each scan's surface.dcm joins its patient and study, and
+        /// the radiograph is written beside it in the scan's frame (xray.dcm); the same file as
+        /// xray_aligner's dicom_file (set both, under /** in a params file) ("": none)
+        dicom_file: String = String::new();
+        /// without a radiograph: the Patient ID in surface.dcm; with one that has none, this one
+        patient_id: String = String::new();
+        /// without a radiograph: the Patient's Name in surface.dcm (DICOM PN, Family^Given)
+        patient_name: String = String::new();
+        /// without a radiograph: the Accession Number of the order
+        accession_number: String = String::new();
+        /// without a radiograph: the Study Instance UID the scans join ("": a new study per scan)
+        study_instance_uid: String = String::new();
+        /// also write the merged points with their colours as a Surface Scan Point Cloud (points.dcm)
+        point_cloud_dcm: bool = false;
+        /// the PACS each scan's DICOM files are sent to, AET@host:port; a scan waits in
+        /// pacs_queue_dir until the PACS has stored it ("": none)
+        pacs: String = String::new();
+        /// our AE title towards the PACS (the calling AE title)
+        ae_title: String = "XSURF".into();
+        /// where scans wait for the PACS (default: <output_dir>/pacs_queue)
+        pacs_queue_dir: Option<PathBuf> = None;
+        /// the scanner's Device Serial Number in the DICOM files
+        device_serial_number: String = "0".into();
+        /// the Institution Name in the DICOM files ("": none)
+        institution_name: String = String::new();
     }
 }
 

@@ -1,0 +1,106 @@
+"""Independent checks of our DICOM surfaces, with pydicom and trimesh.
+
+  check_surface_dcm.py compare SURFACE.dcm MERGED.ply [XRAY.dcm]
+      the Surface Scan Mesh against the PLY it was made from (points, triangles, coordinates),
+      and the radiograph's patient, study and frame beside it: JSON facts on stdout
+  check_surface_dcm.py relabel SURFACE.dcm OUT.dcm
+      the same data set labelled as a Surface Segmentation, the IOD that dciodvfy knows and
+      that shares the Surface Mesh module
+  check_surface_dcm.py series DIR
+      findscu's responses (rsp*.dcm) in DIR: each series' modality, UID and frame
+"""
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pydicom
+import trimesh
+
+
+def compare(surface, ply, xray=None):
+    d = pydicom.dcmread(surface)
+    item = d.SurfaceSequence[0]
+    pts = item.SurfacePointsSequence[0]
+    n = int(pts.NumberOfSurfacePoints)
+    coords = np.frombuffer(pts.PointCoordinatesData, dtype="<f4").reshape(-1, 3)
+    tri = np.frombuffer(item.SurfaceMeshPrimitivesSequence[0].LongTrianglePointIndexList, dtype="<u4").reshape(-1, 3)
+    mesh = trimesh.load(ply, process=False)
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    same_shape = coords.shape == v.shape
+    facts = {
+        "sop_class": str(d.SOPClassUID),
+        "modality": d.Modality,
+        "points": n,
+        "coordinates": int(coords.shape[0]),
+        "triangles": int(tri.shape[0]),
+        "ply_points": int(v.shape[0]),
+        "ply_triangles": int(f.shape[0]),
+        # The surface in mm against the PLY in m, as float32 allows.
+        "max_coordinate_difference_m": float(np.abs(coords.astype(np.float64) / 1000.0 - v).max()) if same_shape else None,
+        "max_coordinate_m": float(np.abs(v).max()) if len(v) else 0.0,
+        "triangles_equal": bool(tri.shape == f.shape and np.array_equal(tri.astype(np.int64) - 1, f)),
+        "index_min": int(tri.min()) if tri.size else None,
+        "index_max": int(tri.max()) if tri.size else None,
+        "acquisition_type": [d.SurfaceScanAcquisitionTypeCodeSequence[0].CodeValue,
+                             d.SurfaceScanAcquisitionTypeCodeSequence[0].CodingSchemeDesignator,
+                             d.SurfaceScanAcquisitionTypeCodeSequence[0].CodeMeaning],
+        "lab": [int(x) for x in item.RecommendedDisplayCIELabValue],
+        "presentation_type": item.RecommendedPresentationType,
+        "study_uid": str(d.StudyInstanceUID),
+        "series_uid": str(d.SeriesInstanceUID),
+        "patient_id": str(d.PatientID),
+        "patient_name": str(d.PatientName),
+        "frame_uid": str(d.FrameOfReferenceUID),
+        "transfer_syntax": str(d.file_meta.TransferSyntaxUID),
+    }
+    if xray:
+        x = pydicom.dcmread(xray)
+        facts.update({
+            "xray_modality": x.Modality,
+            "xray_study_uid": str(x.StudyInstanceUID),
+            "xray_series_uid": str(x.SeriesInstanceUID),
+            "xray_patient_id": str(x.get("PatientID", "")),
+            "xray_frame_uid": str(x.get("FrameOfReferenceUID", "")),
+            "xray_pixels": int(x.pixel_array.size),
+        })
+    return facts
+
+
+def relabel(src, dst):
+    d = pydicom.dcmread(src)
+    d.SOPClassUID = "1.2.840.10008.5.1.4.1.1.66.5"
+    d.file_meta.MediaStorageSOPClassUID = d.SOPClassUID
+    d.Modality = "SEG"
+    d.save_as(dst)
+    return {"written": str(dst)}
+
+
+def series(folder):
+    out = []
+    for f in sorted(Path(folder).glob("rsp*.dcm")):
+        d = pydicom.dcmread(f)
+        out.append({
+            "modality": str(d.get("Modality", "")),
+            "series_uid": str(d.get("SeriesInstanceUID", "")),
+            "study_uid": str(d.get("StudyInstanceUID", "")),
+        })
+    return {"series": out}
+
+
+def main():
+    cmd, args = sys.argv[1], sys.argv[2:]
+    if cmd == "compare":
+        r = compare(*args)
+    elif cmd == "relabel":
+        r = relabel(*args)
+    elif cmd == "series":
+        r = series(*args)
+    else:
+        raise SystemExit(f"unknown command {cmd}")
+    print(json.dumps(r))
+
+
+if __name__ == "__main__":
+    main()
