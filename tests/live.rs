@@ -30,8 +30,39 @@ fn live(mode: &str, seconds: u32) {
     let out = scratch(&format!("live-{mode}"));
     let files = out.join("files");
     let params = live_params(&out, &files, 0.07);
+    // The scan goes to a PACS too (issue 21): Orthanc in the graph's namespace, the merger's
+    // `pacs` and a patient of the params file's (no radiograph here).
+    let pacs = Command::new("Orthanc").arg("--version").output().is_ok() && python().is_some();
+    assert!(
+        pacs || std::env::var_os("XSURF_REQUIRE_CHECKERS").is_none(),
+        "Orthanc is needed: bash scripts/setup-venv.sh"
+    );
+    let fetched = out.join("fetched");
+    let mut env: Vec<(&str, String)> = Vec::new();
+    if pacs {
+        let db = out.join("orthanc");
+        let config = serde_json::json!({
+            "Name": "xsurf-live", "StorageDirectory": db, "IndexDirectory": db, "HttpPort": 18042,
+            "RemoteAccessAllowed": false, "AuthenticationEnabled": false, "DicomAet": "ORTHANC",
+            "DicomPort": 11112, "DicomCheckCalledAet": true, "UnknownSopClassAccepted": false, "Plugins": [],
+        });
+        std::fs::write(out.join("orthanc.json"), config.to_string()).unwrap();
+        let text = std::fs::read_to_string(&params).unwrap().replace(
+            "    merge_delay_s: 1.0\n",
+            "    merge_delay_s: 1.0\n    pacs: ORTHANC@127.0.0.1:11112\n    patient_id: LIVE-1\n    patient_name: LIVE^SCAN\n",
+        );
+        std::fs::write(&params, text).unwrap();
+        env = vec![
+            ("ORTHANC_CONFIG", out.join("orthanc.json").display().to_string()),
+            ("ORTHANC_DICOM_PORT", "11112".into()),
+            ("ORTHANC_HTTP_PORT", "18042".into()),
+            ("QUEUE_DIR", files.join("pacs_queue").display().to_string()),
+            ("FETCH_DIR", fetched.display().to_string()),
+        ];
+    }
     let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).parent().unwrap();
     let run = Command::new(&netns)
+        .envs(env)
         .arg(root().join("tests/live_graph.sh"))
         .args([
             mode,
@@ -77,6 +108,17 @@ fn live(mode: &str, seconds: u32) {
         (e.base_x_m - 0.210).abs() < 0.001 && (e.base_y_m - 0.297).abs() < 0.001 && (e.height_m - 0.086).abs() < 0.001,
         "{e:?}"
     );
+    if pacs {
+        // The PACS holds the scan's surface once, the same as merged.ply, in the params' patient.
+        let got: Vec<std::path::PathBuf> = std::fs::read_dir(&fetched).unwrap().map(|e| e.unwrap().path()).collect();
+        assert_eq!(got.len(), 1, "{got:?}\n{}", logs());
+        let c = checker("check_surface_dcm.py", &[std::path::Path::new("compare"), &got[0], &scan.join("merged.ply")])
+            .unwrap();
+        assert_eq!(c["points"], c["ply_points"], "{c}");
+        assert_eq!(c["triangles_equal"], true, "{c}");
+        assert!(c["max_coordinate_difference_m"].as_f64().unwrap() <= 1e-6, "{c}");
+        assert_eq!((c["patient_id"].as_str(), c["patient_name"].as_str()), (Some("LIVE-1"), Some("LIVE^SCAN")), "{c}");
+    }
     std::fs::remove_dir_all(&out).unwrap();
 }
 

@@ -489,10 +489,16 @@ fn file_bytes(obj: InMemDicomObject, transfer_syntax: &str) -> Result<Vec<u8>, S
     Ok(bytes)
 }
 
+/// The file (PS3.10) of the Surface Scan Mesh instance of `mesh`, as [`write_surface_mesh`]
+/// writes it.
+pub fn surface_mesh_bytes(mesh: &Mesh, inst: &Instance) -> Result<Vec<u8>, String> {
+    file_bytes(surface_mesh(mesh, inst)?, EXPLICIT_VR_LE)
+}
+
 /// Writes the Surface Scan Mesh instance of `mesh` to `path` (atomically).
 pub fn write_surface_mesh(path: &Path, mesh: &Mesh, inst: &Instance) -> Result<(), DicomError> {
     let err = |what: String| DicomError { file: path.to_path_buf(), what };
-    let bytes = file_bytes(surface_mesh(mesh, inst).map_err(err)?, EXPLICIT_VR_LE).map_err(err)?;
+    let bytes = surface_mesh_bytes(mesh, inst).map_err(err)?;
     crate::write_bytes_atomic(path, &bytes).map_err(|e| err(e.cause.to_string()))
 }
 
