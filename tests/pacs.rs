@@ -364,5 +364,14 @@ fn a_pacs_that_is_down_or_wrong_gets_the_scan_later_and_once() {
     assert_eq!(orthanc.instances(), 2);
     let r = xsurf(&["pacs", "echo", &orthanc.addr()]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    // A SOP class the PACS does not take: refused, naming the PACS and the class.
+    let odd = dir.join("odd.dcm");
+    let class = "1.2.826.0.1.3680043.8.498.424242";
+    checker("check_surface_dcm.py", &[Path::new("relabel"), &out2.join("surface.dcm"), &odd, Path::new(class)])
+        .unwrap();
+    let r = xsurf(&["pacs", "send", odd.to_str().unwrap(), &orthanc.addr()]);
+    assert_clean_failure(&r, 1, class);
+    assert_clean_failure(&r, 1, &orthanc.addr());
+    assert_eq!(orthanc.instances(), 2);
     std::fs::remove_dir_all(&dir).unwrap();
 }

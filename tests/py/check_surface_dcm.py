@@ -3,9 +3,9 @@
   check_surface_dcm.py compare SURFACE.dcm MERGED.ply [XRAY.dcm]
       the Surface Scan Mesh against the PLY it was made from (points, triangles, coordinates),
       and the radiograph's patient, study and frame beside it: JSON facts on stdout
-  check_surface_dcm.py relabel SURFACE.dcm OUT.dcm
+  check_surface_dcm.py relabel SURFACE.dcm OUT.dcm [SOP_CLASS]
       the same data set labelled as a Surface Segmentation, the IOD that dciodvfy knows and
-      that shares the Surface Mesh module
+      that shares the Surface Mesh module (or as SOP_CLASS)
   check_surface_dcm.py series DIR
       findscu's responses (rsp*.dcm) in DIR: each series' modality, UID and frame
 """
@@ -68,9 +68,9 @@ def compare(surface, ply, xray=None):
     return facts
 
 
-def relabel(src, dst):
+def relabel(src, dst, sop_class="1.2.840.10008.5.1.4.1.1.66.5"):
     d = pydicom.dcmread(src)
-    d.SOPClassUID = "1.2.840.10008.5.1.4.1.1.66.5"
+    d.SOPClassUID = sop_class
     d.file_meta.MediaStorageSOPClassUID = d.SOPClassUID
     d.Modality = "SEG"
     d.save_as(dst)
