@@ -161,9 +161,15 @@ fn a_reconstructed_scan_lands_in_orthanc_as_one_study_with_the_radiograph() {
     assert_eq!(dciodvfy_errors(&bag.join("xray.dcm")), Vec::<String>::new());
     let out = dir.join("out");
     let x = bag.join("xray.dcm");
+    // The points with their colours too (a Surface Scan Point Cloud in the same series).
+    let params = dir.join("params.yaml");
+    let text = std::fs::read_to_string(bag.join("params.yaml")).unwrap();
+    std::fs::write(&params, format!("{text}\n/merger:\n  ros__parameters:\n    point_cloud_dcm: true\n")).unwrap();
     let r = xsurf(&[
         "reconstruct",
         bag.to_str().unwrap(),
+        "--params-file",
+        params.to_str().unwrap(),
         "--xray",
         x.to_str().unwrap(),
         "--pacs",
@@ -260,7 +266,17 @@ fn a_reconstructed_scan_lands_in_orthanc_as_one_study_with_the_radiograph() {
         ],
     );
     let files: Vec<PathBuf> = std::fs::read_dir(&fetched).unwrap().map(|e| e.unwrap().path()).collect();
-    assert_eq!(files.len(), 2, "{files:?}");
+    assert_eq!(files.len(), 3, "{files:?}");
+    let cloud = files.iter().find(|f| f.file_name().unwrap().to_string_lossy().starts_with("SSp")).unwrap();
+    let c = checker("check_surface_dcm.py", &[Path::new("cloud"), cloud, &out.join("merged.ply")]).unwrap();
+    assert_eq!(c["points"], c["ply_points"], "{c}");
+    assert_eq!(c["colours"], c["ply_points"], "{c}");
+    assert!(c["max_coordinate_difference_m"].as_f64().unwrap() <= 1e-6, "{c}");
+    assert_eq!(c["series_uid"], ours["series_uid"], "one OSS series");
+    let local =
+        checker("check_surface_dcm.py", &[Path::new("cloud"), &out.join("points.dcm"), &out.join("merged.ply")])
+            .unwrap();
+    assert_eq!(c["lab_md5"], local["lab_md5"], "the colours as written");
     let surface = files.iter().find(|f| f.file_name().unwrap().to_string_lossy().starts_with("SSm")).unwrap();
     let xray = files.iter().find(|f| f.file_name().unwrap().to_string_lossy().starts_with("DX")).unwrap();
     let back =

@@ -342,19 +342,19 @@ fn outgoing(files: &[PathBuf]) -> Result<Vec<Outgoing>, PacsError> {
         .collect()
 }
 
-/// The presentation contexts to propose: per SOP class and file syntax, that syntax and the
-/// two uncompressed little-endian ones.
+/// The presentation contexts to propose, per SOP class and file syntax: one of the file's own
+/// syntax alone (so that a PACS that takes it is not offered another: a file may not fit one,
+/// as a point cloud's colours do not fit Explicit VR), then one of the uncompressed
+/// little-endian syntaxes it is not in, for a PACS that does not take it.
 fn contexts(out: &[Outgoing]) -> Vec<(String, Vec<String>)> {
     let mut contexts: Vec<(String, Vec<String>)> = Vec::new();
     for o in out {
-        let mut ts = vec![o.syntax.clone()];
-        for s in [EXPLICIT_VR_LE, IMPLICIT_VR_LE] {
-            if !ts.iter().any(|t| t == s) {
-                ts.push(s.into());
+        let fallback: Vec<String> =
+            [EXPLICIT_VR_LE, IMPLICIT_VR_LE].into_iter().filter(|s| *s != o.syntax).map(String::from).collect();
+        for ts in [vec![o.syntax.clone()], fallback] {
+            if !contexts.iter().any(|(c, t)| *c == o.class && *t == ts) {
+                contexts.push((o.class.clone(), ts));
             }
-        }
-        if !contexts.iter().any(|(c, t)| *c == o.class && *t == ts) {
-            contexts.push((o.class.clone(), ts));
         }
     }
     contexts
@@ -524,7 +524,8 @@ impl Queue {
     }
 }
 
-/// The `.dcm` files in `dir` and its folders, sorted; `dir` itself if it is a file.
+/// The `.dcm` files in `dir` and its folders (but a PACS queue's), sorted; `dir` itself if it
+/// is a file.
 pub fn dicom_files(dir: &Path) -> Vec<PathBuf> {
     if dir.is_file() {
         return vec![dir.to_path_buf()];
@@ -539,7 +540,10 @@ pub fn dicom_files(dir: &Path) -> Vec<PathBuf> {
                 continue;
             }
             if p.is_dir() {
-                stack.push(p);
+                // A queue inside (a reconstruction's pacs_queue) holds copies: not sent twice.
+                if !Queue::is_queue(&p) {
+                    stack.push(p);
+                }
             } else if p.extension().is_some_and(|x| x.eq_ignore_ascii_case("dcm")) {
                 v.push(p);
             }

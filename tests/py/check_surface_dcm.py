@@ -3,12 +3,15 @@
   check_surface_dcm.py compare SURFACE.dcm MERGED.ply [XRAY.dcm]
       the Surface Scan Mesh against the PLY it was made from (points, triangles, coordinates),
       and the radiograph's patient, study and frame beside it: JSON facts on stdout
+  check_surface_dcm.py cloud POINTS.dcm MERGED.ply
+      the Surface Scan Point Cloud against the PLY's points: counts, coordinates, colours
   check_surface_dcm.py relabel SURFACE.dcm OUT.dcm [SOP_CLASS]
       the same data set labelled as a Surface Segmentation, the IOD that dciodvfy knows and
       that shares the Surface Mesh module (or as SOP_CLASS)
   check_surface_dcm.py series DIR
       findscu's responses (rsp*.dcm) in DIR: each series' modality, UID and frame
 """
+import hashlib
 import json
 import sys
 from pathlib import Path
@@ -68,6 +71,30 @@ def compare(surface, ply, xray=None):
     return facts
 
 
+def cloud(points_dcm, ply):
+    d = pydicom.dcmread(points_dcm)
+    pts = d.SurfacePointsSequence[0]
+    coords = np.frombuffer(pts.PointCoordinatesData, dtype="<f4").reshape(-1, 3)
+    v = np.asarray(trimesh.load(ply, process=False).vertices, dtype=np.float64)
+    # US beyond 64 KiB: a PACS storing it in Explicit VR gives it as UN (PS3.5 6.2.2), bytes.
+    el = d.get((0x0080, 0x0007))
+    lab = None
+    if el is not None:
+        raw = el.value
+        lab = np.frombuffer(raw, dtype="<u2") if isinstance(raw, (bytes, bytearray)) else np.asarray(raw, dtype="<u2")
+    return {
+        "lab_md5": hashlib.md5(lab.tobytes()).hexdigest() if lab is not None else None,
+        "sop_class": str(d.SOPClassUID),
+        "points": int(pts.NumberOfSurfacePoints),
+        "ply_points": int(v.shape[0]),
+        "colours": (len(lab) // 3) if lab is not None else 0,
+        "max_coordinate_difference_m": float(np.abs(coords.astype(np.float64) / 1000.0 - v).max())
+        if coords.shape == v.shape else None,
+        "series_uid": str(d.SeriesInstanceUID),
+        "transfer_syntax": str(d.file_meta.TransferSyntaxUID),
+    }
+
+
 def relabel(src, dst, sop_class="1.2.840.10008.5.1.4.1.1.66.5"):
     d = pydicom.dcmread(src)
     d.SOPClassUID = sop_class
@@ -93,6 +120,8 @@ def main():
     cmd, args = sys.argv[1], sys.argv[2:]
     if cmd == "compare":
         r = compare(*args)
+    elif cmd == "cloud":
+        r = cloud(*args)
     elif cmd == "relabel":
         r = relabel(*args)
     elif cmd == "series":
