@@ -5,13 +5,15 @@
 # inside ../shared/tools/netns-run. A Cyclone DDS probe measures stamp -> profile latency and
 # lost frames; CPU and peak RSS per process come from /proc. Prints one JSON line per run and a
 # table. Needs the venv of the tests (`bash scripts/setup-venv.sh`).
-# usage: bash scripts/bench-live.sh [SECONDS] [SIZES] [CLOUD_RATE_HZ]
-#   SIZES: "640x480 1920x1200" (default both); CLOUD_RATE_HZ: the meshers' growing cloud (default 1)
+# usage: bash scripts/bench-live.sh [SECONDS] [SIZES] [CLOUD_RATE_HZ] [MESH_RATE_HZ]
+#   SIZES: "640x480 1920x1200" (default both); CLOUD_RATE_HZ: the meshers' growing cloud (default 1);
+#   MESH_RATE_HZ: the meshers' growing surface (default 2, the node's default)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 secs=${1:-20}
 sizes=${2:-640x480 1920x1200}
 cloud_rate=${3:-1.0}
+mesh_rate=${4:-2.0}
 # A profile waits for the first table -> carm sample after its image's stamp (interpolation, no
 # extrapolation), so the tf rate bounds the latency: 100 Hz adds up to 10 ms.
 tf_rate=${TF_RATE:-100.0}
@@ -40,12 +42,12 @@ for size in $sizes; do
 /c_arm_pose:
   ros__parameters: {speed: 0.07, travel_start_m: -2.0, travel_end_m: 2.0, start_delay_s: 1.0, rate_hz: $tf_rate}
 /**/mesher:
-  ros__parameters: {cloud_rate_hz: $cloud_rate}
+  ros__parameters: {cloud_rate_hz: $cloud_rate, mesh_rate_hz: $mesh_rate}
 /**/triangulator:
   ros__parameters: {max_extrapolation_s: $extrapolation}
 YAML
   for mode in separate composed; do
-    echo "== $size @ $fps fps, $mode, ${secs} s, tf $tf_rate Hz, extrapolation $extrapolation s, cloud $cloud_rate Hz" >&2
+    echo "== $size @ $fps fps, $mode, ${secs} s, tf $tf_rate Hz, extrapolation $extrapolation s, cloud $cloud_rate Hz, mesh $mesh_rate Hz" >&2
     "$netns" .venv/bin/python scripts/bench_live_probe.py "$bin" launch-config/xsurf.launch.yaml "$params" \
       "$mode" "$secs" "$fps" "$work/$size-$mode" | tee -a "$results"
   done

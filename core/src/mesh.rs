@@ -623,8 +623,14 @@ impl GridShape {
 }
 
 /// Calls `emit([a, b, c])` (grid indices) for every triangle the mesher makes of `grid`.
-fn grid_triangles(grid: &Grid, cfg: &MeshConfig, mut emit: impl FnMut([usize; 3])) {
-    let (ns, nf) = (grid.samples(), grid.frames());
+fn grid_triangles(grid: &Grid, cfg: &MeshConfig, emit: impl FnMut([usize; 3])) {
+    grid_triangles_in(grid, cfg, 0..grid.frames(), emit);
+}
+
+/// [`grid_triangles`] of the cells between consecutive frames of `frames` only (the cells
+/// from frame `f` to `f + 1` for `f` in `frames.start..frames.end - 1`).
+fn grid_triangles_in(grid: &Grid, cfg: &MeshConfig, frames: std::ops::Range<usize>, mut emit: impl FnMut([usize; 3])) {
+    let (ns, nf) = (grid.samples(), frames.end.min(grid.frames()));
     let pts = grid.points();
     let valid = |i: usize| pts[i][0].is_finite();
     let sin_min = cfg.min_angle_deg.to_radians().sin();
@@ -641,7 +647,7 @@ fn grid_triangles(grid: &Grid, cfg: &MeshConfig, mut emit: impl FnMut([usize; 3]
             Some(g) => triangle_ok(t, max_edge, 0.0) && triangle_ok(t.map(|p| g.squeezed(p)), f32::INFINITY, sin_min),
         }
     };
-    for f in 0..nf.saturating_sub(1) {
+    for f in frames.start..nf.saturating_sub(1) {
         for s in 0..ns.saturating_sub(1) {
             let i00 = f * ns + s;
             let i10 = i00 + 1; // next sample, same frame
@@ -686,11 +692,29 @@ pub fn meshed_samples(grid: &Grid, cfg: &MeshConfig) -> Vec<bool> {
 /// Triangulates an organized grid into a mesh. Its vertices are the grid's finite points that
 /// some triangle uses (isolated points are left out of the surface; the grid keeps them).
 pub fn mesh_grid(grid: &Grid, cfg: &MeshConfig) -> Mesh {
+    let mut mesh = raw_mesh(grid, cfg, 0..grid.frames());
+    mesh.smooth(cfg.smooth_iterations, cfg.smooth_lambda);
+    mesh.compute_normals();
+    mesh
+}
+
+/// The part of [`mesh_grid`] between the frames of `frames` (the cells from each frame of it to
+/// the next), unsmoothed: what a growing scan adds since its last part. The parts of
+/// consecutive ranges that share their boundary frame (`a..b`, then `b - 1..c`) together hold
+/// every triangle of the unsmoothed whole, each once.
+pub fn mesh_grid_frames(grid: &Grid, cfg: &MeshConfig, frames: std::ops::Range<usize>) -> Mesh {
+    let mut mesh = raw_mesh(grid, cfg, frames);
+    mesh.compute_normals();
+    mesh
+}
+
+/// The triangles of the cells in `frames`, on the samples they use, facing up.
+fn raw_mesh(grid: &Grid, cfg: &MeshConfig, frames: std::ops::Range<usize>) -> Mesh {
     const UNUSED: u32 = u32::MAX;
     const USED: u32 = u32::MAX - 1;
     let mut index = vec![UNUSED; grid.points().len()];
-    let mut corners: Vec<[u32; 3]> = Vec::with_capacity(2 * grid.points().len());
-    grid_triangles(grid, cfg, |t| {
+    let mut corners: Vec<[u32; 3]> = Vec::with_capacity(2 * grid.samples() * frames.len());
+    grid_triangles_in(grid, cfg, frames, |t| {
         corners.push(t.map(|i| i as u32));
         for i in t {
             index[i] = USED;
@@ -726,8 +750,6 @@ pub fn mesh_grid(grid: &Grid, cfg: &MeshConfig) -> Mesh {
             t.swap(1, 2);
         }
     }
-    mesh.smooth(cfg.smooth_iterations, cfg.smooth_lambda);
-    mesh.compute_normals();
     mesh
 }
 
@@ -775,6 +797,39 @@ mod tests {
             g.push(f as i64, &p).unwrap();
         }
         g
+    }
+
+    /// A growing scan's parts, each meshed from the frame where the last one ended, hold the
+    /// unsmoothed whole's triangles, each once (compared by their corners' positions).
+    #[test]
+    fn the_parts_of_a_growing_scan_make_the_whole() {
+        let g = surface(60, 50, 0.001, 0.0023, 0.0002, |x, y| 0.05 + 0.3 * (x - 0.03) * (y - 0.05));
+        let cfg = MeshConfig { smooth_iterations: 0, ..MeshConfig::default() };
+        let key = |m: &Mesh| -> Vec<[[u32; 3]; 3]> {
+            let mut v: Vec<[[u32; 3]; 3]> = m
+                .triangles
+                .iter()
+                .map(|t| {
+                    let mut c = t.map(|i| m.positions[i as usize].map(f32::to_bits));
+                    c.sort_unstable();
+                    c
+                })
+                .collect();
+            v.sort_unstable();
+            v
+        };
+        let whole = key(&mesh_grid(&g, &cfg));
+        assert!(whole.len() > 5000);
+        let mut parts = Vec::new();
+        let mut from = 0;
+        for to in [1, 2, 9, 10, 23, 50] {
+            let m = mesh_grid_frames(&g, &cfg, from..to);
+            assert!(m.positions.iter().all(|p| p[1] >= from as f32 * 0.0023 - 1e-6), "only the new frames");
+            parts.extend(key(&m));
+            from = to.max(1) - 1;
+        }
+        parts.sort_unstable();
+        assert_eq!(parts, whole);
     }
 
     /// Smooth surfaces, ridges and steps in either direction keep every point, at the sample

@@ -533,6 +533,8 @@ pub mod visualization_msgs {
         pub const ADD: i32 = 0;
         /// `action`: delete this marker.
         pub const DELETE: i32 = 2;
+        /// `action`: delete every marker (of the display the topic feeds).
+        pub const DELETEALL: i32 = 3;
     }
     /// `visualization_msgs/msg/MarkerArray`.
     #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]

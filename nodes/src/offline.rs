@@ -343,13 +343,17 @@ fn build_graph(topics: &BagTopics, ros: &RosArgs, opts: &Options) -> anyhow::Res
         let transport = image_transport(cam, &topics.transports[cam], ros)?;
         for node in components::NODES.iter().filter(|t| t.role == components::Role::PerCamera) {
             // What the bag and the command decide, given to each node that declares it: the
-            // images' transport to the image readers, the output folder to the file writers.
+            // images' transport to the image readers, the output folder to the file writers; and
+            // no growing surface for the meshers (offline nobody watches it grow).
             let declared = (node.declarations)();
-            let extra: Vec<(&str, ParamValue)> =
-                [("image_transport", ParamValue::String(transport.into())), ("output_dir", out_dir.clone())]
-                    .into_iter()
-                    .filter(|(name, _)| declared.iter().any(|d| d.name == *name))
-                    .collect();
+            let extra: Vec<(&str, ParamValue)> = [
+                ("image_transport", ParamValue::String(transport.into())),
+                ("output_dir", out_dir.clone()),
+                ("mesh_rate_hz", ParamValue::Double(0.0)),
+            ]
+            .into_iter()
+            .filter(|(name, _)| declared.iter().any(|d| d.name == *name))
+            .collect();
             router.add(build(node.name, &ns, &extra)?, node.name, &ns, &ros.remaps);
         }
     }

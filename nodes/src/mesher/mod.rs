@@ -1,5 +1,9 @@
 //! `mesher`: `profile` -> the organized grid of the scan (`cloud`, published while the scan
-//! runs) and its mesh (`mesh`, at END), plus `<output_dir>/scan_<id>/<cam>.ply`.
+//! runs) and its mesh (`mesh`, at END), plus `<output_dir>/scan_<id>/<cam>.ply`. While the scan
+//! runs, `mesh` also carries the growing surface at `mesh_rate_hz`: each part holds only the
+//! triangles of the frames since the last part (`core::mesh::mesh_grid_frames`), as a marker
+//! of its own in namespace `<cam>_growing` that a viewer keeps; at END a DELETEALL clears them
+//! and the scan's cleaned, smoothed mesh follows.
 //!
 //! Scans are bounded by `/scan/events` from whoever publishes them: frames outside START..END
 //! belong to no scan (counted; a frame stamped before START that arrives after it as well). A
@@ -33,6 +37,8 @@ struct Config {
     mesh: MeshConfig,
     cloud_period_ns: Option<i64>,
     republish_ns: Option<i64>,
+    /// The growing surface's period (`mesh_rate_hz`).
+    mesh_period_ns: Option<i64>,
     output_dir: Option<PathBuf>,
     camera: String,
     frame_id: String,
@@ -60,6 +66,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     Ok(Config {
         mesh,
         cloud_period_ns: (p.cloud_rate_hz > 0.0).then(|| (1e9 / p.cloud_rate_hz) as i64),
+        mesh_period_ns: (p.mesh_rate_hz > 0.0).then(|| (1e9 / p.mesh_rate_hz) as i64),
         republish_ns: seconds(p.mesh_republish_s),
         output_dir: p.output_dir,
         camera: p.camera,
@@ -206,6 +213,23 @@ pub struct MesherNode {
     points_rejected: u64,
     /// The scan's frames, for its report.
     account: ScanAccount,
+    /// The growing surface: the first frame whose cells are not yet published, the parts
+    /// published in this scan, and the stamp of the last one.
+    growing: Growing,
+}
+
+/// The growing surface of a scan (`mesh_rate_hz`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Growing {
+    from_frame: usize,
+    parts: u32,
+    last_ns: i64,
+}
+
+impl Default for Growing {
+    fn default() -> Self {
+        Growing { from_frame: 0, parts: 0, last_ns: i64::MIN }
+    }
 }
 
 /// Profiles kept between scans for a START event that arrives after them.
@@ -227,7 +251,8 @@ pub enum Input {
 pub enum Output {
     /// `cloud`: the scan's organized grid, growing while it runs.
     Cloud,
-    /// `mesh`: the scan's mesh, at its end.
+    /// `mesh`: the growing surface's parts while the scan runs; a DELETEALL and the scan's mesh
+    /// at its end.
     Mesh,
     /// `/scan/report`: this camera's account of each scan.
     Report,
@@ -276,6 +301,7 @@ impl MesherNode {
             bad_profiles: 0,
             points_rejected: 0,
             account: ScanAccount::default(),
+            growing: Growing::default(),
         })
     }
 
@@ -286,6 +312,27 @@ impl MesherNode {
         self.grid = Grid::default();
         self.gaps = GapDetector::default();
         self.last_cloud_ns = i64::MIN;
+        self.growing = Growing::default();
+    }
+
+    /// The growing surface's next part: the cells of the frames since the last part, a marker
+    /// of its own in namespace `<camera>_growing`.
+    fn publish_part(&mut self, stamp: i64, out: &mut Out) {
+        let frames = self.grid.frames();
+        if frames < self.growing.from_frame + 2 {
+            return;
+        }
+        let part = xsurf_core::mesh::mesh_grid_frames(&self.grid, &self.cfg.mesh, self.growing.from_frame..frames);
+        self.growing.from_frame = frames - 1;
+        self.growing.last_ns = stamp;
+        if part.triangles.is_empty() {
+            return;
+        }
+        let header = convert::header(stamp, &self.cfg.frame_id);
+        let ns = format!("{}_growing", self.camera);
+        let id = self.growing.parts as i32;
+        self.growing.parts += 1;
+        out.publish(Output::Mesh, Msg::Marker(Arc::new(convert::mesh_marker(&part, header, &ns, id, 1.0))));
     }
 
     fn push(&mut self, stamp: i64, p: &Profile) -> Result<(), NodeError> {
@@ -358,6 +405,12 @@ impl MesherNode {
         self.mesh_points += mesh.positions.len() as u64;
         let header = convert::header(stamp, &self.cfg.frame_id);
         out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud(&grid, header.clone()))));
+        if self.growing.parts > 0 {
+            // The growing parts go; the scan's mesh takes their place.
+            let clear = Marker { header: header.clone(), action: Marker::DELETEALL, ..Default::default() };
+            out.publish(Output::Mesh, Msg::Marker(Arc::new(clear)));
+            self.growing = Growing::default();
+        }
         let marker = Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header, &self.camera, self.scan_id as i32, 1.0)));
         out.publish(Output::Mesh, marker.clone());
         self.last_mesh.set(vec![(Output::Mesh, marker)]);
@@ -432,6 +485,9 @@ impl MesherNode {
                 let h = convert::header(stamp, &self.cfg.frame_id);
                 out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud(&self.grid, h))));
             }
+        }
+        if self.cfg.mesh_period_ns.is_some_and(|period| stamp.saturating_sub(self.growing.last_ns) >= period) {
+            self.publish_part(stamp, out);
         }
         Ok(())
     }
@@ -675,5 +731,68 @@ mod tests {
         // The single hole it leaves is filled from its neighbours (`fill_single_holes`).
         assert_eq!(cloud.valid(), 40 * 20);
         assert!((cloud.point(5, 10)[2] - 0.05).abs() < 1e-6, "{:?}", cloud.point(5, 10));
+    }
+
+    /// While a scan runs the surface grows at `mesh_rate_hz`: parts of the new frames only, in
+    /// order, in a namespace of their own; at END a DELETEALL, then the scan's mesh (issue 22).
+    #[test]
+    fn the_surface_grows_in_parts_of_the_new_frames() {
+        #![allow(clippy::unwrap_used)]
+        let (mut m, mut out) = mesher_of_a_64x40_camera();
+        m.set_identity("mesher", "/cam1");
+        let event = |kind: u8, sec: i32| {
+            let mut e = ScanEvent { scan_id: 2, event: kind, ..Default::default() };
+            e.header.stamp.sec = sec;
+            Msg::ScanEvent(Arc::new(e))
+        };
+        m.handle(Input::Events, &event(ScanEvent::START, 1), &mut out).unwrap();
+        // 2 s at 30 fps over a gentle slope, 2 mm between frames.
+        let frames = 60u32;
+        for f in 0..frames {
+            let points = (0..40).map(|s| [s as f32 * 0.001, f as f32 * 0.002, 0.05 + s as f32 * 0.0002]).collect();
+            let p = Profile { points, intensity: vec![50.0; 40], rgb: None, range: vec![0.5; 40], outside_volume: 0 };
+            let mut h = xsurf_msgs::std_msgs::Header::default();
+            let ns = 1_100_000_000u64 + u64::from(f) * 33_333_333;
+            (h.stamp.sec, h.stamp.nanosec) = ((ns / 1_000_000_000) as i32, (ns % 1_000_000_000) as u32);
+            m.handle(Input::Profile, &Msg::Cloud(Arc::new(convert::profile_cloud(&p, h))), &mut out).unwrap();
+        }
+        let during: Vec<Marker> = out
+            .items
+            .iter()
+            .filter_map(|(port, msg)| match msg {
+                Msg::Marker(k) if *port == Output::Mesh => Some((**k).clone()),
+                _ => None,
+            })
+            .collect();
+        // At 2 Hz: a part each 15 frames, the first as soon as two frames are in.
+        assert!((4..=5).contains(&during.len()), "{} parts", during.len());
+        let mut next_y = 0.0f64;
+        let mut triangles = 0;
+        for (k, part) in during.iter().enumerate() {
+            assert_eq!((part.ns.as_str(), part.id, part.action), ("cam1_growing", k as i32, Marker::ADD));
+            let ys: Vec<f64> = part.points.iter().map(|p| p.y).collect();
+            let (lo, hi) = ys.iter().fold((f64::MAX, f64::MIN), |(a, b), &y| (a.min(y), b.max(y)));
+            // Each part starts at the frame where the last one ended: only new cells.
+            assert!((lo - next_y).abs() < 1e-6, "part {k} starts at {lo}, expected {next_y}");
+            next_y = hi;
+            triangles += part.points.len() / 3;
+        }
+        // Every cell of the frames covered so far, two triangles each.
+        let covered = (next_y / 0.002).round() as usize;
+        assert_eq!(triangles, 2 * 39 * covered);
+        out.items.clear();
+        m.handle(Input::Events, &event(ScanEvent::END, 3), &mut out).unwrap();
+        m.finish(&mut out);
+        let after: Vec<Marker> = out
+            .items
+            .iter()
+            .filter_map(|(port, msg)| match msg {
+                Msg::Marker(k) if *port == Output::Mesh => Some((**k).clone()),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(after.len(), 2);
+        assert_eq!(after[0].action, Marker::DELETEALL);
+        assert_eq!((after[1].ns.as_str(), after[1].id, after[1].points.len() / 3), ("cam1", 2, 2 * 39 * (frames as usize - 1)));
     }
 }

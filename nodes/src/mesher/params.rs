@@ -28,6 +28,12 @@ xsurf_runtime::parameters! {
         smooth_lambda: f32 = D.smooth_lambda;
         /// how often the growing cloud is published during a scan (0: only at END)
         cloud_rate_hz: f64 = 2.0, unit "Hz", range 0.0..=1000.0;
+        /// how often the growing surface is published during a scan: the triangles of the frames
+        /// since the last part only (unsmoothed, uncleaned), each part a marker of its own
+        /// (namespace <camera>_growing, ids 0, 1, ...) that a viewer keeps, so the surface grows
+        /// behind the C-arm; at END a DELETEALL clears them before the scan's mesh (0: the mesh
+        /// only at END)
+        mesh_rate_hz: f64 = 2.0, unit "Hz", range 0.0..=1000.0;
         /// after END the mesh marker is published again this often until the next scan, so
         /// viewers that join late or lose it (best effort) get it (0: once)
         mesh_republish_s: f64 = 2.0, unit "s", range 0.0..=3600.0;
