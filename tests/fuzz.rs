@@ -363,6 +363,22 @@ fn targets() -> Vec<Target> {
             run: |_, path, _| outcome(xsurf_formats::dicom::read_file(path)),
         },
         Target {
+            name: "dicom_study",
+            ext: "dcm",
+            tokens: DICOM_TOKENS,
+            names_file: true,
+            max_allocated: MAX_ALLOCATED_BYTES,
+            run: |_, path, _| outcome(xsurf_formats::dicom_surface::read_study(path)),
+        },
+        Target {
+            name: "dimse_response",
+            ext: "bin",
+            tokens: BIN_TOKENS,
+            names_file: false,
+            max_allocated: MAX_ALLOCATED_BYTES,
+            run: |b, _, _| outcome(xsurf_nodes::pacs::command_status(b)),
+        },
+        Target {
             name: "ply",
             ext: "ply",
             tokens: PLY_TOKENS,
@@ -907,6 +923,20 @@ fn write_seed_corpus() {
     let dcm = tmp.join("x.dcm");
     xsurf_formats::dicom::write_file(&dcm, &radiograph, &xinfo, "fuzz").unwrap();
     put("dicom", "radiograph.dcm", &std::fs::read(&dcm).unwrap());
+    put("dicom_study", "radiograph.dcm", &std::fs::read(&dcm).unwrap());
+    // A C-STORE-RSP command set as a PACS sends it (Implicit VR Little Endian).
+    let el =
+        |e: u16, v: &[u8]| [&0u16.to_le_bytes()[..], &e.to_le_bytes(), &(v.len() as u32).to_le_bytes(), v].concat();
+    let class = b"1.2.840.10008.5.1.4.1.1.68.1\0";
+    let body = [
+        el(0x0002, class),
+        el(0x0100, &0x8001u16.to_le_bytes()),
+        el(0x0120, &1u16.to_le_bytes()),
+        el(0x0800, &0x0101u16.to_le_bytes()),
+        el(0x0900, &0u16.to_le_bytes()),
+    ]
+    .concat();
+    put("dimse_response", "c_store_rsp.bin", &[el(0x0000, &(body.len() as u32).to_le_bytes()), body].concat());
     let ply = tmp.join("m.ply");
     xsurf_formats::ply::write_file(&ply, &mesh).unwrap();
     put("ply", "mesh.ply", &std::fs::read(&ply).unwrap());

@@ -61,6 +61,28 @@ impl Grid {
         self.stamps_ns.push(stamp_ns);
         Ok(())
     }
+    /// The frames of `frames` with every `stride`-th sample (0, stride, 2 stride, ...): a
+    /// coarser grid of part of the scan, for a preview.
+    pub fn part(&self, frames: std::ops::Range<usize>, stride: usize) -> Grid {
+        let stride = stride.max(1);
+        let take = |v: &[f32], f: usize| -> Vec<f32> {
+            v[f * self.samples..(f + 1) * self.samples].iter().step_by(stride).copied().collect()
+        };
+        let mut g = Grid::new(self.samples.div_ceil(stride));
+        for f in frames.start..frames.end.min(self.frames()) {
+            let row = f * self.samples..(f + 1) * self.samples;
+            let p = Profile {
+                points: self.points[row.clone()].iter().step_by(stride).copied().collect(),
+                intensity: take(&self.intensity, f),
+                rgb: self.has_rgb.then(|| self.rgb[row].iter().step_by(stride).copied().collect()),
+                range: take(&self.range, f),
+                ..Default::default()
+            };
+            // Same lengths by construction.
+            let _ = g.push(self.stamps_ns[f], &p);
+        }
+        g
+    }
     /// Point at sample `s` of frame `f`.
     pub fn point(&self, s: usize, f: usize) -> [f32; 3] {
         self.points[f * self.samples + s]
@@ -797,6 +819,18 @@ mod tests {
             g.push(f as i64, &p).unwrap();
         }
         g
+    }
+
+    /// A part of a grid: its frames, every stride-th sample, the rest as it was.
+    #[test]
+    fn a_part_of_a_grid_keeps_its_frames_and_every_nth_sample() {
+        let g = flat_grid(7, 5, 0.001, 0.002);
+        let whole = g.part(0..5, 1);
+        assert_eq!((whole.points(), whole.stamps_ns()), (g.points(), g.stamps_ns()));
+        let p = g.part(2..9, 3);
+        assert_eq!((p.samples(), p.frames()), (3, 3));
+        assert_eq!(p.point(2, 0), g.point(6, 2));
+        assert_eq!(p.stamps_ns(), &g.stamps_ns()[2..5]);
     }
 
     /// A growing scan's parts, each meshed from the frame where the last one ended, hold the

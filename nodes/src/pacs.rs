@@ -248,13 +248,35 @@ fn response_status(scu: &mut ClientAssociation<TcpStream>, peer: &Peer) -> Resul
         return Err(assoc(format!("unexpected response {}", pdu.short_description())));
     };
     let v = data.first().ok_or_else(|| assoc("an empty response".into()))?;
-    let ts = TransferSyntaxRegistry.get(IMPLICIT_VR_LE).ok_or_else(|| assoc("no implicit VR little endian".into()))?;
-    let obj = InMemDicomObject::read_dataset_with_ts(&v.data[..], ts)
-        .map_err(|e| assoc(format!("malformed response: {e}")))?;
-    obj.element(tags::STATUS)
-        .ok()
-        .and_then(|e| e.to_int::<u16>().ok())
-        .ok_or_else(|| assoc("a response without a status".into()))
+    command_status(&v.data).map_err(|e| assoc(format!("malformed response: {e}")))
+}
+
+/// The Status (0000,0900) of a DIMSE response's command set (Implicit VR Little Endian, PS3.7
+/// 6.3.1), read element by element with every length checked against the bytes (a PACS's
+/// bytes are outside input: no length it claims is allocated).
+pub fn command_status(b: &[u8]) -> Result<u16, String> {
+    let mut pos = 0usize;
+    while pos < b.len() {
+        let head = b.get(pos..pos + 8).ok_or_else(|| format!("an element header cut short at byte offset {pos}"))?;
+        let group = u16::from_le_bytes([head[0], head[1]]);
+        let element = u16::from_le_bytes([head[2], head[3]]);
+        let len = u32::from_le_bytes([head[4], head[5], head[6], head[7]]) as usize;
+        if group != 0x0000 {
+            return Err(format!("element ({group:04X},{element:04X}) at byte offset {pos} is not of the command set"));
+        }
+        let start = pos + 8;
+        let value = b.get(start..start.saturating_add(len)).ok_or_else(|| {
+            format!("element (0000,{element:04X}) at byte offset {pos} says {len} bytes; {} are left", b.len() - start)
+        })?;
+        if element == 0x0900 {
+            return match value {
+                [lo, hi] => Ok(u16::from_le_bytes([*lo, *hi])),
+                _ => Err(format!("Status (0000,0900) at byte offset {pos} has {len} bytes, not 2")),
+            };
+        }
+        pos = start + len;
+    }
+    Err("a response without a Status (0000,0900)".into())
 }
 
 /// C-ECHO to `peer`: `Ok` when it answers with success.
@@ -646,6 +668,21 @@ impl Drop for Sender {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_response_status_is_read_with_every_length_checked() {
+        let el =
+            |e: u16, v: &[u8]| [&0u16.to_le_bytes()[..], &e.to_le_bytes(), &(v.len() as u32).to_le_bytes(), v].concat();
+        let ok =
+            [el(0x0000, &[0; 4]), el(0x0100, &0x8001u16.to_le_bytes()), el(0x0900, &0xA700u16.to_le_bytes())].concat();
+        assert_eq!(command_status(&ok), Ok(0xA700));
+        assert!(command_status(&ok[..ok.len() - 1]).unwrap_err().contains("says 2 bytes; 1 are left"));
+        let mut huge = el(0x0100, &[1, 0]);
+        huge[4..8].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(command_status(&huge).unwrap_err().contains("byte offset 0 says 4294967295 bytes"));
+        assert!(command_status(&el(0x0100, &[1, 0])).unwrap_err().contains("without a Status"));
+        assert!(command_status(&[8, 0, 0x16, 0, 0, 0, 0, 0]).unwrap_err().contains("not of the command set"));
+    }
 
     #[test]
     fn addresses_and_titles() {
