@@ -14,6 +14,8 @@ secs=${1:-20}
 sizes=${2:-640x480 1920x1200}
 cloud_rate=${3:-1.0}
 mesh_rate=${4:-2.0}
+# The growing surface's sample stride (the mesher's mesh_preview_stride).
+mesh_stride=${MESH_STRIDE:-4}
 # A profile waits for the first table -> carm sample after its image's stamp (interpolation, no
 # extrapolation), so the tf rate bounds the latency: 100 Hz adds up to 10 ms.
 tf_rate=${TF_RATE:-100.0}
@@ -42,12 +44,12 @@ for size in $sizes; do
 /c_arm_pose:
   ros__parameters: {speed: 0.07, travel_start_m: -2.0, travel_end_m: 2.0, start_delay_s: 1.0, rate_hz: $tf_rate}
 /**/mesher:
-  ros__parameters: {cloud_rate_hz: $cloud_rate, mesh_rate_hz: $mesh_rate}
+  ros__parameters: {cloud_rate_hz: $cloud_rate, mesh_rate_hz: $mesh_rate, mesh_preview_stride: $mesh_stride}
 /**/triangulator:
   ros__parameters: {max_extrapolation_s: $extrapolation}
 YAML
   for mode in separate composed; do
-    echo "== $size @ $fps fps, $mode, ${secs} s, tf $tf_rate Hz, extrapolation $extrapolation s, cloud $cloud_rate Hz, mesh $mesh_rate Hz" >&2
+    echo "== $size @ $fps fps, $mode, ${secs} s, tf $tf_rate Hz, extrapolation $extrapolation s, cloud $cloud_rate Hz, mesh $mesh_rate Hz (stride $mesh_stride)" >&2
     "$netns" .venv/bin/python scripts/bench_live_probe.py "$bin" launch-config/xsurf.launch.yaml "$params" \
       "$mode" "$secs" "$fps" "$work/$size-$mode" | tee -a "$results"
   done

@@ -782,10 +782,10 @@ mod tests {
             next_y = hi;
             triangles += part.points.len() / 3;
         }
-        // Every cell of the frames covered so far, two triangles each, over every second
-        // sample (mesh_preview_stride 2: 20 of the 40).
+        // Every cell of the frames covered so far, two triangles each, over every fourth
+        // sample (mesh_preview_stride 4: 10 of the 40).
         let covered = (next_y / 0.002).round() as usize;
-        assert_eq!(triangles, 2 * 19 * covered);
+        assert_eq!(triangles, 2 * 9 * covered);
         out.items.clear();
         m.handle(Input::Events, &event(ScanEvent::END, 3), &mut out).unwrap();
         m.finish(&mut out);

@@ -34,9 +34,10 @@ xsurf_runtime::parameters! {
         /// behind the C-arm; at END a DELETEALL clears them before the scan's mesh (0: the mesh
         /// only at END)
         mesh_rate_hz: f64 = 2.0, unit "Hz", range 0.0..=1000.0;
-        /// the growing surface takes every n-th sample of each frame (a preview: 2 halves its
-        /// triangles and the bytes on the wire; the scan's mesh at END has every sample)
-        mesh_preview_stride: u32 = 2, range 1..=64;
+        /// the growing surface takes every n-th sample of each frame (a preview: 4 quarters its
+        /// triangles and the bytes on the wire, which a composed graph's one DDS participant
+        /// sends beside the camera chains'; the scan's mesh at END has every sample)
+        mesh_preview_stride: u32 = 4, range 1..=64;
         /// after END the mesh marker is published again this often until the next scan, so
         /// viewers that join late or lose it (best effort) get it (0: once)
         mesh_republish_s: f64 = 2.0, unit "s", range 0.0..=3600.0;
