@@ -8,6 +8,8 @@
 # Idempotent: each part is redone only when its inputs change.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# Debian puts Orthanc in /usr/sbin, which a non-login shell's PATH may lack.
+export PATH="$PATH:/usr/local/sbin:/usr/sbin:/sbin"
 stamp=.venv/.requirements
 if ! [[ -x .venv/bin/python && -f $stamp ]] || ! cmp -s tests/requirements.txt "$stamp"; then
   python3 -m venv .venv

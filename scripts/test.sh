@@ -4,6 +4,8 @@
 # real images).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# Debian puts Orthanc in /usr/sbin, which a non-login shell's PATH may lack.
+export PATH="$PATH:/usr/local/sbin:/usr/sbin:/sbin"
 export CARGO_TERM_COLOR=never
 echo "== set-up: Python checkers"
 bash scripts/setup-venv.sh

@@ -139,9 +139,18 @@ fn dciodvfy_errors(file: &Path) -> Vec<String> {
     text.lines().filter(|l| l.starts_with("Error")).map(str::to_string).collect()
 }
 
-fn run_dcmtk(tool: &str, args: &[&str]) {
-    let out = Command::new(tool).args(args).output().unwrap();
-    assert!(out.status.success(), "{tool} {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+/// dcmtk's `tool` (findscu, getscu) as XSURF to the test's Orthanc, with the query `keys`, its
+/// files into `out`.
+fn dcmtk_query(tool: &str, port: u16, keys: &[&str], out: &Path, extra: &[&str]) {
+    let port = port.to_string();
+    let mut args: Vec<&str> = vec!["-S", "-aet", "XSURF", "-aec", "ORTHANC", "127.0.0.1", &port];
+    for k in keys {
+        args.extend(["-k", k]);
+    }
+    args.extend(extra);
+    args.extend(["-od", out.to_str().unwrap()]);
+    let r = Command::new(tool).args(&args).output().unwrap();
+    assert!(r.status.success(), "{tool} {args:?}: {}", String::from_utf8_lossy(&r.stderr));
 }
 
 /// A pyramid bag of the test's own, with a fresh radiograph (today's DX writer).
@@ -210,33 +219,11 @@ fn a_reconstructed_scan_lands_in_orthanc_as_one_study_with_the_radiograph() {
     assert_eq!(ours["xray_study_uid"], ours["study_uid"]);
     assert_eq!(ours["xray_frame_uid"], ours["frame_uid"]);
     assert_eq!(ours["patient_id"], "XSURF-SYNTH");
-    let port = orthanc.dicom_port.to_string();
     let found = dir.join("found");
     std::fs::create_dir_all(&found).unwrap();
-    let (s_key, q) = (format!("StudyInstanceUID={study}"), "QueryRetrieveLevel=SERIES");
-    run_dcmtk(
-        "findscu",
-        &[
-            "-S",
-            "-aet",
-            "XSURF",
-            "-aec",
-            "ORTHANC",
-            "127.0.0.1",
-            &port,
-            "-k",
-            q,
-            "-k",
-            &s_key,
-            "-k",
-            "SeriesInstanceUID",
-            "-k",
-            "Modality",
-            "-X",
-            "-od",
-            found.to_str().unwrap(),
-        ],
-    );
+    let s_key = format!("StudyInstanceUID={study}");
+    let keys = ["QueryRetrieveLevel=SERIES", &s_key, "SeriesInstanceUID", "Modality"];
+    dcmtk_query("findscu", orthanc.dicom_port, &keys, &found, &["-X"]);
     let series = checker("check_surface_dcm.py", &[Path::new("series"), &found]).unwrap();
     let mut modalities: Vec<&str> =
         series["series"].as_array().unwrap().iter().map(|s| s["modality"].as_str().unwrap()).collect();
@@ -247,24 +234,7 @@ fn a_reconstructed_scan_lands_in_orthanc_as_one_study_with_the_radiograph() {
     // Fetched back by getscu: the surface as merged.ply has it, to float precision.
     let fetched = dir.join("fetched");
     std::fs::create_dir_all(&fetched).unwrap();
-    run_dcmtk(
-        "getscu",
-        &[
-            "-S",
-            "-aet",
-            "XSURF",
-            "-aec",
-            "ORTHANC",
-            "127.0.0.1",
-            &port,
-            "-k",
-            "QueryRetrieveLevel=STUDY",
-            "-k",
-            &s_key,
-            "-od",
-            fetched.to_str().unwrap(),
-        ],
-    );
+    dcmtk_query("getscu", orthanc.dicom_port, &["QueryRetrieveLevel=STUDY", &s_key], &fetched, &[]);
     let files: Vec<PathBuf> = std::fs::read_dir(&fetched).unwrap().map(|e| e.unwrap().path()).collect();
     assert_eq!(files.len(), 3, "{files:?}");
     let cloud = files.iter().find(|f| f.file_name().unwrap().to_string_lossy().starts_with("SSp")).unwrap();

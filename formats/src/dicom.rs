@@ -644,17 +644,29 @@ pub fn write_file(path: &Path, image: &Radiograph, info: &XrayInfo, key: &str) -
         els.push(s(tags::IMAGER_PIXEL_SPACING, VR::DS, &format!("{}\\{}", format_ds(r * 1e3), format_ds(c * 1e3))));
     }
     let obj = InMemDicomObject::from_element_iter(els);
+    let bytes = file_bytes(obj, EXPLICIT_VR_LE, DX_FOR_PRESENTATION, &sop_instance).map_err(err)?;
+    crate::write_bytes_atomic(path, &bytes).map_err(|e| err(e.cause.to_string()))
+}
+
+/// The bytes of `obj` as a DICOM file (PS3.10: preamble, file meta group, data set) in
+/// `transfer_syntax`, its meta naming SOP class `class` and instance `instance`.
+pub(crate) fn file_bytes(
+    obj: InMemDicomObject,
+    transfer_syntax: &str,
+    class: &str,
+    instance: &str,
+) -> Result<Vec<u8>, String> {
     let file = obj
         .with_meta(
             FileMetaTableBuilder::new()
-                .transfer_syntax(EXPLICIT_VR_LE)
-                .media_storage_sop_class_uid(DX_FOR_PRESENTATION)
-                .media_storage_sop_instance_uid(sop_instance.as_str()),
+                .transfer_syntax(transfer_syntax)
+                .media_storage_sop_class_uid(class)
+                .media_storage_sop_instance_uid(instance),
         )
-        .map_err(|e| err(format!("file meta: {e}")))?;
+        .map_err(|e| format!("file meta: {e}"))?;
     let mut bytes = Vec::new();
-    file.write_all(&mut bytes).map_err(|e| err(format!("encoding: {e}")))?;
-    crate::write_bytes_atomic(path, &bytes).map_err(|e| err(e.cause.to_string()))
+    file.write_all(&mut bytes).map_err(|e| format!("encoding: {e}"))?;
+    Ok(bytes)
 }
 
 /// A decimal string of at most 16 characters (the DS limit).

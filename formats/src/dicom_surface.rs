@@ -33,7 +33,7 @@ use crate::dicom::{check_uid, name_of, open_checked, uid, DicomError};
 use dicom_core::value::{DataSetSequence, PrimitiveValue, C};
 use dicom_core::{DataElement, Length, Tag, VR};
 use dicom_dictionary_std::{tags, uids};
-use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
+use dicom_object::InMemDicomObject;
 use std::path::Path;
 use xsurf_core::mesh::Mesh;
 
@@ -476,17 +476,7 @@ pub fn point_cloud(mesh: &Mesh, inst: &Instance) -> Result<InMemDicomObject, Str
 fn file_bytes(obj: InMemDicomObject, transfer_syntax: &str) -> Result<Vec<u8>, String> {
     let class = text(&obj, tags::SOP_CLASS_UID);
     let instance = text(&obj, tags::SOP_INSTANCE_UID);
-    let file = obj
-        .with_meta(
-            FileMetaTableBuilder::new()
-                .transfer_syntax(transfer_syntax)
-                .media_storage_sop_class_uid(class)
-                .media_storage_sop_instance_uid(instance),
-        )
-        .map_err(|e| format!("file meta: {e}"))?;
-    let mut bytes = Vec::new();
-    file.write_all(&mut bytes).map_err(|e| format!("encoding: {e}"))?;
-    Ok(bytes)
+    crate::dicom::file_bytes(obj, transfer_syntax, &class, &instance)
 }
 
 /// The file (PS3.10) of the Surface Scan Mesh instance of `mesh`, as [`write_surface_mesh`]
@@ -526,18 +516,7 @@ pub fn write_xray_in_frame(src: &Path, dst: &Path, frame_of_reference_uid: &str)
         obj.put(empty(tags::POSITION_REFERENCE_INDICATOR, VR::LO));
     }
     let ts = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']).to_string();
-    let class = text(&obj, tags::SOP_CLASS_UID);
-    let file = obj
-        .into_inner()
-        .with_meta(
-            FileMetaTableBuilder::new()
-                .transfer_syntax(ts)
-                .media_storage_sop_class_uid(class)
-                .media_storage_sop_instance_uid(instance.as_str()),
-        )
-        .map_err(|e| err(format!("file meta: {e}")))?;
-    let mut bytes = Vec::new();
-    file.write_all(&mut bytes).map_err(|e| err(format!("encoding: {e}")))?;
+    let bytes = file_bytes(obj.into_inner(), &ts).map_err(err)?;
     crate::write_bytes_atomic(dst, &bytes).map_err(|e| err(e.cause.to_string()))?;
     Ok(instance)
 }

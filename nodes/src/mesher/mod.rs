@@ -761,14 +761,16 @@ mod tests {
             (h.stamp.sec, h.stamp.nanosec) = ((ns / 1_000_000_000) as i32, (ns % 1_000_000_000) as u32);
             m.handle(Input::Profile, &Msg::Cloud(Arc::new(convert::profile_cloud(&p, h))), &mut out).unwrap();
         }
-        let during: Vec<Marker> = out
-            .items
-            .iter()
-            .filter_map(|(port, msg)| match msg {
-                Msg::Marker(k) if *port == Output::Mesh => Some((**k).clone()),
-                _ => None,
-            })
-            .collect();
+        let markers = |out: &Out| -> Vec<Marker> {
+            out.items
+                .iter()
+                .filter_map(|(port, msg)| match msg {
+                    Msg::Marker(k) if *port == Output::Mesh => Some((**k).clone()),
+                    _ => None,
+                })
+                .collect()
+        };
+        let during = markers(&out);
         // At 2 Hz: a part each 15 frames, the first as soon as two frames are in.
         assert!((4..=5).contains(&during.len()), "{} parts", during.len());
         let mut next_y = 0.0f64;
@@ -789,14 +791,7 @@ mod tests {
         out.items.clear();
         m.handle(Input::Events, &event(ScanEvent::END, 3), &mut out).unwrap();
         m.finish(&mut out);
-        let after: Vec<Marker> = out
-            .items
-            .iter()
-            .filter_map(|(port, msg)| match msg {
-                Msg::Marker(k) if *port == Output::Mesh => Some((**k).clone()),
-                _ => None,
-            })
-            .collect();
+        let after = markers(&out);
         assert_eq!(after.len(), 2);
         assert_eq!(after[0].action, Marker::DELETEALL);
         assert_eq!((after[1].ns.as_str(), after[1].id, after[1].points.len() / 3), ("cam1", 2, 2 * 39 * (frames as usize - 1)));
