@@ -679,25 +679,21 @@ fn write_files(
         surfaces: meshes.iter().map(|(name, mesh)| Surface { name, mesh, transparency }).collect(),
         plane: plane.cloned(),
     };
-    // Four files of the same surface, independent of each other: written side by side (a
-    // full-body scan's take 0.1 to 0.3 s each on one core).
+    // One after the other: each is built whole in memory before its atomic write, and side by
+    // side their buffers add up (at 1920x1200, some 300 MiB more in a live merger), for 0.1 s
+    // saved offline. A file that fails does not stop the others.
     let (w, h) = PREVIEW_SIZE;
-    std::thread::scope(|s| {
-        let ply = s.spawn(|| xsurf_formats::ply::write_file(&dir.join("merged.ply"), merged).map_err(anyhow::Error::from));
-        let glb = s.spawn(|| xsurf_formats::gltf::write_file(&dir.join("scene.glb"), &scene).map_err(anyhow::Error::from));
-        let png = s.spawn(|| {
+    let results = [
+        xsurf_formats::ply::write_file(&dir.join("merged.ply"), merged).map_err(anyhow::Error::from),
+        xsurf_formats::vrml::write_file(&dir.join("scene.wrl"), &scene).map_err(anyhow::Error::from),
+        xsurf_formats::gltf::write_file(&dir.join("scene.glb"), &scene).map_err(anyhow::Error::from),
+        {
             let rgb = xsurf_formats::preview::render_scene(merged, plane, w, h);
             xsurf_formats::image::write_png(&dir.join("preview.png"), w, h, xsurf_formats::image::PngKind::Rgb8, &rgb)
                 .map_err(anyhow::Error::from)
-        });
-        let wrl = xsurf_formats::vrml::write_file(&dir.join("scene.wrl"), &scene).map_err(anyhow::Error::from);
-        [ply, glb, png]
-            .into_iter()
-            .map(|t| t.join().unwrap_or_else(|_| Err(anyhow::anyhow!("a file writer panicked"))))
-            .chain([wrl])
-            .filter_map(Result::err)
-            .collect()
-    })
+        },
+    ];
+    results.into_iter().filter_map(Result::err).collect()
 }
 
 /// The merger's outputs.
