@@ -71,8 +71,8 @@ pub struct Study {
     pub specific_character_set: String,
 }
 
-/// The patient, study and frame of a radiograph's DICOM file.
-#[derive(Debug, Clone, PartialEq, Eq)]
+/// The patient, study and frame of a radiograph's DICOM file, and the file as read.
+#[derive(Debug, Clone)]
 pub struct XrayStudy {
     /// Its patient and study.
     pub study: Study,
@@ -82,7 +82,13 @@ pub struct XrayStudy {
     pub sop_instance_uid: String,
     /// Its Series Instance UID.
     pub series_instance_uid: String,
+    /// The file as read (for [`write_xray_in_frame`], so that it is not read again).
+    pub file: XrayFileData,
 }
+
+/// A radiograph's DICOM file as read, every element kept.
+#[derive(Debug, Clone)]
+pub struct XrayFileData(dicom_object::DefaultDicomObject);
 
 fn text(obj: &InMemDicomObject, tag: Tag) -> String {
     obj.element_opt(tag)
@@ -129,7 +135,7 @@ pub fn read_study(path: &Path) -> Result<XrayStudy, DicomError> {
         study_description: text(&obj, tags::STUDY_DESCRIPTION),
         specific_character_set: text(&obj, tags::SPECIFIC_CHARACTER_SET),
     };
-    Ok(XrayStudy { study, frame_of_reference_uid, sop_instance_uid, series_instance_uid })
+    Ok(XrayStudy { study, frame_of_reference_uid, sop_instance_uid, series_instance_uid, file: XrayFileData(obj) })
 }
 
 /// A UID under the `2.25` root made from `key` (the same key gives the same UID).
@@ -499,15 +505,16 @@ pub fn write_point_cloud(path: &Path, mesh: &Mesh, inst: &Instance) -> Result<()
     crate::write_bytes_atomic(path, &bytes).map_err(|e| err(e.cause.to_string()))
 }
 
-/// Copies the radiograph `src` to `dst` (atomically) in the scan's Frame of Reference: the same
-/// patient, study and series, a new SOP Instance UID made from the original's and the frame's
-/// (the original is another instance: the same pixels without a frame), Frame of Reference
-/// UID `frame_of_reference_uid` and Position Reference Indicator, the rest as it was.
-pub fn write_xray_in_frame(src: &Path, dst: &Path, frame_of_reference_uid: &str) -> Result<String, DicomError> {
+/// Writes the radiograph `src` (as [`read_study`] read it) to `dst` (atomically) in the scan's
+/// Frame of Reference: the same patient, study and series, a new SOP Instance UID made from the
+/// original's and the frame's (the original is another instance: the same pixels without a
+/// frame), Frame of Reference UID `frame_of_reference_uid` and Position Reference Indicator,
+/// the rest as it was.
+pub fn write_xray_in_frame(src: XrayFileData, dst: &Path, frame_of_reference_uid: &str) -> Result<String, DicomError> {
     let err = |what: String| DicomError { file: dst.to_path_buf(), what };
     check_uid(frame_of_reference_uid)
         .map_err(|why| err(format!("Frame of Reference UID {frame_of_reference_uid:?}: {why}")))?;
-    let mut obj = open_checked(src)?;
+    let mut obj = src.0;
     let original = text(&obj, tags::SOP_INSTANCE_UID);
     let instance = uid(&format!("{original}/in frame {frame_of_reference_uid}"));
     obj.put(el_str(tags::SOP_INSTANCE_UID, VR::UI, &instance));

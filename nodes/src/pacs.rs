@@ -544,6 +544,27 @@ impl Queue {
         let _ = std::fs::remove_dir_all(entry);
         Ok(stored)
     }
+
+    /// Sends every entry to `peer`, oldest first, calling `sent` after each one stored; the
+    /// first failure stops it (that entry and the later ones stay queued) and is returned with
+    /// its entry.
+    pub fn send_all(
+        &self,
+        client: &Client,
+        peer: &Peer,
+        mut sent: impl FnMut(&Path, &[Stored]),
+    ) -> Result<(), Box<(PathBuf, PacsError)>> {
+        for entry in self.entries() {
+            let stored = self.send(client, peer, &entry).map_err(|e| Box::new((entry.clone(), e)))?;
+            sent(&entry, &stored);
+        }
+        Ok(())
+    }
+}
+
+/// A queue entry's name, for messages.
+pub fn entry_name(entry: &Path) -> std::borrow::Cow<'_, str> {
+    entry.file_name().unwrap_or_default().to_string_lossy()
 }
 
 /// The `.dcm` files in `dir` and its folders (but a PACS queue's), sorted; `dir` itself if it
@@ -602,30 +623,21 @@ impl Sender {
             .spawn(move || {
                 let mut backoff = Duration::from_secs(1);
                 loop {
-                    let mut failed = false;
-                    for entry in queue.entries() {
-                        match queue.send(&client, &peer, &entry) {
-                            Ok(stored) => {
-                                c.sent.fetch_add(1, Ordering::Relaxed);
-                                backoff = Duration::from_secs(1);
-                                log::info!(
-                                    "pacs: {} sent to {peer}: {} instance(s) stored",
-                                    entry.file_name().unwrap_or_default().to_string_lossy(),
-                                    stored.len()
-                                );
-                            }
-                            Err(e) => {
-                                c.failures.fetch_add(1, Ordering::Relaxed);
-                                failed = true;
-                                log::error!(
-                                    "pacs: {} stays queued in {} (next try in {} s): {e}",
-                                    entry.file_name().unwrap_or_default().to_string_lossy(),
-                                    queue.dir().display(),
-                                    backoff.as_secs()
-                                );
-                                break;
-                            }
-                        }
+                    let result = queue.send_all(&client, &peer, |entry, stored| {
+                        c.sent.fetch_add(1, Ordering::Relaxed);
+                        backoff = Duration::from_secs(1);
+                        log::info!("pacs: {} sent to {peer}: {} instance(s) stored", entry_name(entry), stored.len());
+                    });
+                    let failed = result.is_err();
+                    if let Err(failure) = result {
+                        let (entry, e) = *failure;
+                        c.failures.fetch_add(1, Ordering::Relaxed);
+                        log::error!(
+                            "pacs: {} stays queued in {} (next try in {} s): {e}",
+                            entry_name(&entry),
+                            queue.dir().display(),
+                            backoff.as_secs()
+                        );
                     }
                     let wait = if failed { backoff } else { Duration::from_secs(3600) };
                     if failed {

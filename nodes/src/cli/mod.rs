@@ -448,11 +448,8 @@ fn send_scans(out: &Path, peer: &crate::pacs::Peer, client: &crate::pacs::Client
     }
     let stamp = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0);
     for d in &dirs {
-        let files: Vec<PathBuf> = std::fs::read_dir(d)?
-            .filter_map(Result::ok)
-            .map(|e| e.path())
-            .filter(|p| p.is_file() && p.extension().is_some_and(|x| x == "dcm"))
-            .collect();
+        // A scan's folder holds no folders but a queue's, which dicom_files passes over.
+        let files = crate::pacs::dicom_files(d);
         if files.is_empty() {
             continue;
         }
@@ -469,28 +466,20 @@ fn send_queue(
     peer: &crate::pacs::Peer,
     client: &crate::pacs::Client,
 ) -> anyhow::Result<()> {
-    for entry in queue.entries() {
-        match queue.send(client, peer, &entry) {
-            Ok(stored) => println!(
-                "pacs: {} stored in {peer}: {}",
-                entry.file_name().unwrap_or_default().to_string_lossy(),
-                stored
-                    .iter()
-                    .map(|s| s.file.file_name().unwrap_or_default().to_string_lossy())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-            Err(e) => {
-                return Err(anyhow!(
-                    "{e}\n  not sent: {} scan(s) wait in {} (`xsurf pacs send {} {peer}` sends them)",
-                    queue.entries().len(),
-                    queue.dir().display(),
-                    queue.dir().display()
-                ))
-            }
-        }
-    }
-    Ok(())
+    queue
+        .send_all(client, peer, |entry, stored| {
+            let files: Vec<_> = stored.iter().map(|s| crate::pacs::entry_name(&s.file)).collect();
+            println!("pacs: {} stored in {peer}: {}", crate::pacs::entry_name(entry), files.join(", "));
+        })
+        .map_err(|failure| {
+            let e = &failure.1;
+            anyhow!(
+                "{e}\n  not sent: {} scan(s) wait in {} (`xsurf pacs send {} {peer}` sends them)",
+                queue.entries().len(),
+                queue.dir().display(),
+                queue.dir().display()
+            )
+        })
 }
 
 fn cmd_pacs(args: &[String]) -> anyhow::Result<()> {

@@ -126,7 +126,7 @@ pub struct ScanSpan {
 /// Writes the scan's DICOM files into `dir`; returns the files written, or what is wrong
 /// (naming the file) when none could be.
 pub fn write_scan(cfg: &DicomConfig, dir: &Path, scan: ScanSpan, merged: &Mesh) -> Result<Vec<PathBuf>, String> {
-    let (study, frame) = match &cfg.dicom_file {
+    let (study, frame, xray) = match &cfg.dicom_file {
         Some(f) => {
             let x = ds::read_study(f).map_err(|e| format!("{e}: no DICOM written for scan {}", scan.scan_id))?;
             let mut study = x.study;
@@ -142,14 +142,14 @@ pub fn write_scan(cfg: &DicomConfig, dir: &Path, scan: ScanSpan, merged: &Mesh) 
                     study.patient_id = cfg.study.patient_id.clone();
                 }
             }
-            (study, x.frame_of_reference_uid)
+            (study, x.frame_of_reference_uid, Some(x.file))
         }
         None => {
             let mut study = cfg.study.clone();
             if study.study_instance_uid.is_empty() {
                 study.study_instance_uid = ds::uid_for(&format!("xsurf/study/{}/{}", scan.start_ns, scan.scan_id));
             }
-            (study, None)
+            (study, None, None)
         }
     };
     let key = format!("xsurf/{}/{}/{}", study.study_instance_uid, scan.start_ns, scan.scan_id);
@@ -177,10 +177,10 @@ pub fn write_scan(cfg: &DicomConfig, dir: &Path, scan: ScanSpan, merged: &Mesh) 
         ds::write_point_cloud(&points, merged, &pc).map_err(|e| e.to_string())?;
         files.push(points);
     }
-    if let Some(f) = &cfg.dicom_file {
-        let xray = dir.join("xray.dcm");
-        ds::write_xray_in_frame(f, &xray, &frame).map_err(|e| e.to_string())?;
-        files.push(xray);
+    if let Some(x) = xray {
+        let path = dir.join("xray.dcm");
+        ds::write_xray_in_frame(x, &path, &frame).map_err(|e| e.to_string())?;
+        files.push(path);
     }
     Ok(files)
 }

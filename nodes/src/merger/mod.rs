@@ -202,7 +202,7 @@ impl MergerNode {
     /// Builds the node from its parameters.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
         let cfg = config(p)?;
-        Ok(Self {
+        let mut node = Self {
             statics: TfBuffer::new(&cfg.table_frame, &cfg.carm_frame, 0),
             cfg,
             clouds: BTreeMap::new(),
@@ -232,18 +232,15 @@ impl MergerNode {
             pacs: None,
             dicom_scans: 0,
             pacs_queued: 0,
-        }
-        .with_pacs())
-    }
-
-    fn with_pacs(mut self) -> Self {
-        self.start_pacs();
-        self
+        };
+        node.start_pacs();
+        Ok(node)
     }
 
     /// Starts the PACS sender the configuration asks for (what is queued goes first); a queue
     /// that cannot be made is logged, and the scans' files stay in their folders.
     fn start_pacs(&mut self) {
+        // The old sender first ends (after its current attempt), so that two never send one queue.
         self.pacs = None;
         self.pacs = self.cfg.pacs.as_ref().and_then(|(peer, client, dir)| match crate::pacs::Queue::open(dir) {
             Ok(q) => {
