@@ -4,6 +4,7 @@
 //! documented example. Rotations are quaternions `[x, y, z, w]` of `carm -> <cam>_optical_frame`.
 
 use crate::camera::{CameraError, CameraModel, Distortion};
+use crate::edge::LaserColor;
 use crate::geom::{Iso3, Quat, Vec3};
 use crate::triangulate::CameraGeometry;
 use serde::{Deserialize, Serialize};
@@ -85,15 +86,73 @@ impl RigCamera {
     }
 }
 
+/// One laser of a scanner with several (the spec's `lasers` list; `laser.<name>.plane`,
+/// `.source`, `.channel`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RigLaser {
+    /// Its name in `lasers`: a letter, then letters, digits and underscores.
+    pub name: String,
+    /// Its plane in `carm`, `[nx, ny, nz, d]` with a unit normal.
+    pub plane: [f64; 4],
+    /// Its source point in `carm`, metres.
+    pub source: [f64; 3],
+    /// Its colour: on colour cameras its line is found in this colour against the others.
+    pub channel: LaserColor,
+}
+
 /// Cameras and laser of one scanner.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Rig {
-    /// The laser plane in `carm`, `[nx, ny, nz, d]`.
+    /// The laser plane in `carm`, `[nx, ny, nz, d]` (the collimator's: the X-ray fan beam's).
     pub laser_plane: [f64; 4],
     /// The laser (and X-ray) source in `carm`, metres.
     pub laser_source: [f64; 3],
+    /// A scanner with several lasers: each one's plane, source and colour. Empty: the single
+    /// laser `laser_plane` is the whole scanner.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lasers: Vec<RigLaser>,
     /// The cameras.
     pub cameras: Vec<RigCamera>,
+}
+
+/// At most this many lasers: each needs a colour of its own (red, green, blue).
+pub const MAX_LASERS: usize = 3;
+
+/// Checks a scanner's lasers as every reader of a rig file and every node's `lasers`
+/// parameters are checked: at most [`MAX_LASERS`], names that are ROS name tokens and unique,
+/// planes with a unit normal (within 1e-3), finite sources, one colour each. The message names
+/// the laser and its field (`laser.<name>.plane`).
+pub fn validate_lasers(lasers: &[RigLaser]) -> Result<(), String> {
+    if lasers.len() > MAX_LASERS {
+        return Err(format!(
+            "lasers: {} lasers; at most {MAX_LASERS} (one per colour: red, green, blue)",
+            lasers.len()
+        ));
+    }
+    for (i, l) in lasers.iter().enumerate() {
+        let at = format!("laser.{}", l.name);
+        if !valid_ros_token(&l.name) {
+            return Err(format!("lasers: {:?} is not a valid name (a letter, then letters, digits or _)", l.name));
+        }
+        if lasers[..i].iter().any(|o| o.name == l.name) {
+            return Err(format!("lasers: {:?} is listed twice", l.name));
+        }
+        let n = l.plane[..3].iter().map(|x| x * x).sum::<f64>().sqrt();
+        if !l.plane.iter().all(|x| x.is_finite()) || (n - 1.0).abs() > 1e-3 {
+            return Err(format!("{at}.plane: {:?} is not [nx, ny, nz, d] with a unit normal (|n| = {n})", l.plane));
+        }
+        if !l.source.iter().all(|x| x.is_finite()) {
+            return Err(format!("{at}.source: {:?} is not finite", l.source));
+        }
+        if let Some(o) = lasers[..i].iter().find(|o| o.channel == l.channel) {
+            return Err(format!(
+                "{at}.channel: {} is laser.{}'s too; a camera tells lasers apart only by colour",
+                l.channel.name(),
+                o.name
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Whether `name` is a valid ROS name token (a namespace or frame prefix): a letter, then
@@ -145,7 +204,67 @@ impl Rig {
         if !finite(&self.laser_source) {
             return Err(format!("laser_source {:?} is not finite", self.laser_source));
         }
-        Ok(())
+        validate_lasers(&self.lasers)
+    }
+
+    /// The scanner's lasers: the `lasers` list, or without one the single laser `laser_plane`
+    /// (named `laser`, red).
+    pub fn effective_lasers(&self) -> Vec<RigLaser> {
+        if !self.lasers.is_empty() {
+            return self.lasers.clone();
+        }
+        vec![RigLaser {
+            name: "laser".into(),
+            plane: self.laser_plane,
+            source: self.laser_source,
+            channel: LaserColor::Red,
+        }]
+    }
+
+    /// A three-laser scanner (the study's recommendation of more fan beams): the collimator's
+    /// plane (red, vertical, as [`Rig::study`]'s) and two planes tilted 25 degrees about the
+    /// table's X axis, one from each side of the travel (green from -Y, blue from +Y), meeting
+    /// the tabletop under the collimator's line. Each lights the upright faces across the travel
+    /// on its side, which the collimator's plane only grazes. The cameras look from 45 degrees
+    /// (the study's preferred angle, section 6.1), so that each views the tilted plane on its
+    /// side at 20 degrees and the collimator's at 45.
+    pub fn three_lasers(width: u32, height: u32) -> Rig {
+        let mut rig = Rig::study(width, height);
+        // The study's cameras are valid at every size it is asked for.
+        let Ok(model) = rig.cameras[0].model() else { return rig };
+        let target = Vec3::new(0.0, 0.0, 0.05);
+        let cam = |name: &str, eye: Vec3, down: Vec3| {
+            // look_at only fails for coincident points or a parallel hint; these are fixed.
+            let pose = Iso3::look_at(eye, target, down).unwrap_or(Iso3::IDENTITY);
+            RigCamera::from_parts(name, &model, &pose)
+        };
+        rig.cameras = vec![
+            cam("cam1", Vec3::new(-0.20, -0.62, 0.67), Vec3::X),
+            cam("cam2", Vec3::new(0.20, 0.62, 0.67), -Vec3::X),
+        ];
+        let (s, c) = 25f64.to_radians().sin_cos();
+        let height_m = 1.0;
+        rig.lasers = vec![
+            RigLaser {
+                name: "collimator".into(),
+                plane: rig.laser_plane,
+                source: rig.laser_source,
+                channel: LaserColor::Red,
+            },
+            RigLaser {
+                name: "left".into(),
+                plane: [0.0, c, s, 0.0],
+                source: [0.0, -height_m * s / c, height_m],
+                channel: LaserColor::Green,
+            },
+            RigLaser {
+                name: "right".into(),
+                plane: [0.0, c, -s, 0.0],
+                source: [0.0, height_m * s / c, height_m],
+                channel: LaserColor::Blue,
+            },
+        ];
+        rig
     }
 
     /// The study's two-camera arrangement (thesis section 6.1: cameras 30 degrees from the
@@ -172,6 +291,7 @@ impl Rig {
         Rig {
             laser_plane: [0.0, 1.0, 0.0, 0.0],
             laser_source: [0.0, 0.0, 1.2],
+            lasers: Vec::new(),
             cameras: vec![
                 cam("cam1", Vec3::new(-0.25, -0.40, 0.80), Vec3::X),
                 cam("cam2", Vec3::new(0.25, 0.40, 0.80), -Vec3::X),
@@ -207,6 +327,23 @@ mod tests {
         bad(&|r| r.cameras[0].width = 100_000, "width 100000 is not in 32..=8192");
         bad(&|r| r.cameras[0].fx = -1.0, "fx -1");
         bad(&|r| r.laser_plane = [0.0, 0.0, 0.0, 0.0], "laser_plane");
+        let three = Rig::three_lasers(640, 480);
+        assert_eq!(three.validate(), Ok(()));
+        for l in &three.lasers {
+            let p = crate::geom::Plane::from_params(l.plane).unwrap();
+            assert!(p.signed_distance(Vec3::from_array(l.source)).abs() < 1e-12, "{} passes its source", l.name);
+        }
+        let bad3 = |f: &dyn Fn(&mut Vec<RigLaser>), says: &str| {
+            let mut l = three.lasers.clone();
+            f(&mut l);
+            let e = validate_lasers(&l).unwrap_err();
+            assert!(e.contains(says), "{says}: {e}");
+        };
+        bad3(&|l| l[1].channel = LaserColor::Red, "laser.left.channel: red is laser.collimator's too");
+        bad3(&|l| l[2].plane = [0.0, 2.0, 0.0, 0.0], "laser.right.plane");
+        bad3(&|l| l[1].source[0] = f64::NAN, "laser.left.source");
+        bad3(&|l| l[1].name = "collimator".into(), "listed twice");
+        bad3(&|l| l.push(l[0].clone()), "at most 3");
         assert!(valid_ros_token("cam_2") && !valid_ros_token("2cam") && !valid_ros_token(""));
     }
 }

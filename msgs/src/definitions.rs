@@ -306,6 +306,7 @@ float32[] v                     # sub-pixel row of the line centre, NaN where no
 float32[] strength              # peak height above the local background (grey levels), 0 where none
 float32[] width                 # line width (pixels, full width at half maximum), 0 where none
 uint8[] rgb                     # surface colour beside the line, 3 bytes a sample; empty for mono images
+string[] lasers                 # with several lasers: their names, one block of samples each (laser k: samples k*n..(k+1)*n); empty: one laser
 "#,
         &["std_msgs/msg/Header"],
     ),

@@ -552,8 +552,9 @@ pub mod visualization_msgs {
 pub mod xsurf_msgs {
     use super::std_msgs::Header;
     use super::*;
-    /// `xsurf_msgs/msg/LaserLine`: the laser line found in one camera image.
-    #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+    /// `xsurf_msgs/msg/LaserLine`: the laser line found in one camera image; with several
+    /// lasers, each laser's line, one block of samples per laser in the order of `lasers`.
+    #[derive(Debug, Clone, PartialEq, Default, Serialize)]
     pub struct LaserLine {
         /// Stamp and frame of the source image.
         pub header: Header,
@@ -574,6 +575,79 @@ pub mod xsurf_msgs {
         /// Colour beside the line, 3 bytes a sample; empty for grey images.
         #[serde(with = "serde_bytes")]
         pub rgb: Vec<u8>,
+        /// The lasers whose lines these are, one block of samples each (samples
+        /// `k * n .. (k + 1) * n` are laser `lasers[k]`'s, `n` one per row or column); empty:
+        /// one laser, the single `laser_plane` (and every message written before this field).
+        pub lasers: Vec<String>,
+    }
+
+    /// The fields of a `LaserLine` before `lasers` (what older bags and peers send).
+    #[derive(Deserialize)]
+    struct LaserLineFields {
+        header: Header,
+        image_width: u32,
+        image_height: u32,
+        orientation: u8,
+        u: Vec<f32>,
+        v: Vec<f32>,
+        strength: Vec<f32>,
+        width: Vec<f32>,
+        #[serde(with = "serde_bytes")]
+        rgb: Vec<u8>,
+    }
+
+    /// Every field, `lasers` defaulted: a `LaserLine` from a self-describing format (JSON).
+    #[derive(Deserialize)]
+    struct LaserLineAll {
+        #[serde(flatten)]
+        f: LaserLineFields,
+        #[serde(default)]
+        lasers: Vec<String>,
+    }
+
+    impl LaserLineFields {
+        fn with(self, lasers: Vec<String>) -> LaserLine {
+            let f = self;
+            LaserLine {
+                header: f.header,
+                image_width: f.image_width,
+                image_height: f.image_height,
+                orientation: f.orientation,
+                u: f.u,
+                v: f.v,
+                strength: f.strength,
+                width: f.width,
+                rgb: f.rgb,
+                lasers,
+            }
+        }
+    }
+
+    /// A `LaserLine` whose payload ends before `lasers` (a message written before the field
+    /// existed) reads as one laser; CDR lays a nested struct out inline, so the older fields
+    /// are read as one.
+    impl<'de> Deserialize<'de> for LaserLine {
+        fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+            struct V;
+            impl<'de> serde::de::Visitor<'de> for V {
+                type Value = LaserLine;
+                fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                    f.write_str("xsurf_msgs/msg/LaserLine")
+                }
+                fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<LaserLine, A::Error> {
+                    let f: LaserLineFields =
+                        seq.next_element()?.ok_or_else(|| serde::de::Error::invalid_length(0, &self))?;
+                    // The payload's end before `lasers`: an older message, one laser.
+                    let lasers = seq.next_element::<Vec<String>>().ok().flatten().unwrap_or_default();
+                    Ok(f.with(lasers))
+                }
+                fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<LaserLine, A::Error> {
+                    let a = LaserLineAll::deserialize(serde::de::value::MapAccessDeserializer::new(map))?;
+                    Ok(a.f.with(a.lasers))
+                }
+            }
+            d.deserialize_struct("LaserLine", &["fields", "lasers"], V)
+        }
     }
     impl LaserLine {
         /// One sample per image row.

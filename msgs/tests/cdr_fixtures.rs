@@ -78,6 +78,34 @@ fn definitions_carry_the_dependency_closure() {
     assert!(definition_of("nope/msg/Nope").is_none());
 }
 
+/// A LaserLine written before `lasers` existed (its payload ends after `rgb`) reads as one
+/// laser; one with lasers keeps them.
+#[test]
+fn laser_lines_without_the_lasers_field_read_as_one_laser() {
+    let line = ours::LaserLine {
+        header: std_msgs::Header { frame_id: "cam1_optical_frame".into(), ..Default::default() },
+        image_width: 640,
+        image_height: 3,
+        u: vec![1.5, f32::NAN, 3.0],
+        v: vec![0.0, 1.0, 2.0],
+        strength: vec![9.0, 0.0, 8.0],
+        width: vec![2.0, 0.0, 2.5],
+        rgb: vec![1, 2, 3, 4, 5, 6, 7],
+        ..Default::default()
+    };
+    let bytes = cdr::encode(&line).unwrap();
+    // The older layout: the same bytes up to the end of rgb (the empty list and its padding cut).
+    let old = &bytes[..bytes.len() - 4 - 1];
+    assert_eq!(u32::from_le_bytes(bytes[bytes.len() - 4..].try_into().unwrap()), 0);
+    let back: ours::LaserLine = cdr::decode(old).unwrap();
+    assert_eq!(format!("{back:?}"), format!("{line:?}"));
+    let three = ours::LaserLine { lasers: vec!["collimator".into(), "left".into(), "right".into()], ..line.clone() };
+    let back: ours::LaserLine = cdr::decode(&cdr::encode(&three).unwrap()).unwrap();
+    assert_eq!(back.lasers, three.lasers);
+    // A payload cut inside the older fields is still an error.
+    assert!(cdr::decode::<ours::LaserLine>(&old[..old.len() - 6]).is_err());
+}
+
 #[test]
 fn truncated_and_foreign_payloads_are_errors() {
     let b = cdr::encode(&std_msgs::Header { frame_id: "table".into(), ..Default::default() }).unwrap();

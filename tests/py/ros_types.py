@@ -94,6 +94,7 @@ class LaserLine(IdlStruct, typename="xsurf_msgs::msg::dds_::LaserLine_"):
     strength: sequence[float32] = field(default_factory=list)
     width: sequence[float32] = field(default_factory=list)
     rgb: sequence[uint8] = field(default_factory=list)
+    lasers: sequence[str] = field(default_factory=list)
 
 
 @dataclass

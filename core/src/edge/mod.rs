@@ -100,27 +100,92 @@ pub enum Channel {
     /// others, so white surfaces, room light and highlights drop out. The default.
     #[default]
     RedMinusOthers,
+    /// The green channel.
+    Green,
+    /// The blue channel.
+    Blue,
+    /// Green minus the mean of red and blue, clamped at 0 (a green laser).
+    GreenMinusOthers,
+    /// Blue minus the mean of red and green, clamped at 0 (a blue laser).
+    BlueMinusOthers,
 }
 
+/// Every channel, in the order of [`Channel::name`]'s list.
+const CHANNELS: [Channel; 7] = [
+    Channel::RedMinusOthers,
+    Channel::GreenMinusOthers,
+    Channel::BlueMinusOthers,
+    Channel::Red,
+    Channel::Green,
+    Channel::Blue,
+    Channel::Luma,
+];
+
 impl Channel {
-    /// Parses `red`, `luma`, `red_minus_others`.
+    /// Parses `red_minus_others`, `green_minus_others`, `blue_minus_others`, `red`, `green`,
+    /// `blue`, `luma`.
     pub fn parse(s: &str) -> Option<Channel> {
-        match s {
-            "red" => Some(Channel::Red),
-            "luma" => Some(Channel::Luma),
-            "red_minus_others" => Some(Channel::RedMinusOthers),
-            _ => None,
-        }
+        CHANNELS.into_iter().find(|c| c.name() == s)
     }
-}
-
-impl Channel {
     /// The parameter value naming this channel.
     pub fn name(self) -> &'static str {
         match self {
             Channel::Red => "red",
             Channel::Luma => "luma",
             Channel::RedMinusOthers => "red_minus_others",
+            Channel::Green => "green",
+            Channel::Blue => "blue",
+            Channel::GreenMinusOthers => "green_minus_others",
+            Channel::BlueMinusOthers => "blue_minus_others",
+        }
+    }
+    /// A laser of colour `c` seen against the other colours: what the detector reads for each
+    /// laser of a scanner with several.
+    pub fn against_others(c: LaserColor) -> Channel {
+        match c {
+            LaserColor::Red => Channel::RedMinusOthers,
+            LaserColor::Green => Channel::GreenMinusOthers,
+            LaserColor::Blue => Channel::BlueMinusOthers,
+        }
+    }
+    /// The signal of this channel from one pixel's red, green and blue.
+    pub fn of(self, r: f32, g: f32, b: f32) -> f32 {
+        match self {
+            Channel::Red => r,
+            Channel::Green => g,
+            Channel::Blue => b,
+            Channel::Luma => 0.299 * r + 0.587 * g + 0.114 * b,
+            Channel::RedMinusOthers => (r - 0.5 * (g + b)).max(0.0),
+            Channel::GreenMinusOthers => (g - 0.5 * (r + b)).max(0.0),
+            Channel::BlueMinusOthers => (b - 0.5 * (r + g)).max(0.0),
+        }
+    }
+}
+
+/// The colour of a laser (parameter `laser.<name>.channel`): on colour cameras each laser's
+/// line is found in its own colour against the others.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LaserColor {
+    /// A red laser.
+    Red,
+    /// A green laser.
+    Green,
+    /// A blue laser.
+    Blue,
+}
+
+impl LaserColor {
+    /// Parses `red`, `green`, `blue`.
+    pub fn parse(s: &str) -> Option<LaserColor> {
+        [LaserColor::Red, LaserColor::Green, LaserColor::Blue].into_iter().find(|c| c.name() == s)
+    }
+    /// The parameter value naming this colour.
+    pub fn name(self) -> &'static str {
+        match self {
+            LaserColor::Red => "red",
+            LaserColor::Green => "green",
+            LaserColor::Blue => "blue",
         }
     }
 }
@@ -143,7 +208,11 @@ macro_rules! named {
 }
 named!(Method, "unknown method {:?} (center_of_gravity, gaussian, parabolic or gradient)");
 named!(Orientation, "{:?} is not vertical or horizontal");
-named!(Channel, "unknown channel {:?} (red_minus_others, red or luma)");
+named!(
+    Channel,
+    "unknown channel {:?} (red_minus_others, green_minus_others, blue_minus_others, red, green, blue or luma)"
+);
+named!(LaserColor, "unknown laser colour {:?} (red, green or blue)");
 
 /// A rectangle of the image to search (pixels); zero width or height means "to the edge".
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -272,9 +341,29 @@ pub enum EdgeError {
         /// What is wrong.
         reason: String,
     },
+    /// Several lasers in a grey image: only colour tells their lines apart.
+    #[error("a {encoding} image cannot tell {lasers} lasers apart (their lines are told apart by colour)")]
+    GreyWithLasers {
+        /// The image's encoding.
+        encoding: &'static str,
+        /// Lasers configured.
+        lasers: usize,
+    },
 }
 
 impl EdgeConfig {
+    /// The columns and rows of `image` that the region of interest searches.
+    pub fn region(&self, image: &ImageView<'_>) -> Result<(std::ops::Range<u32>, std::ops::Range<u32>), EdgeError> {
+        let (w, h) = (image.width(), image.height());
+        let roi = self.roi;
+        if roi.x_offset >= w || roi.y_offset >= h {
+            return Err(EdgeError::RoiOutside { roi, width: w, height: h });
+        }
+        let x1 = if roi.width == 0 { w } else { (roi.x_offset + roi.width).min(w) };
+        let y1 = if roi.height == 0 { h } else { (roi.y_offset + roi.height).min(h) };
+        Ok((roi.x_offset..x1, roi.y_offset..y1))
+    }
+
     /// Checks every value; the same check refuses a bad run-time parameter set.
     pub fn validate(&self) -> Result<(), EdgeError> {
         let bad = |name, reason: &str| Err(EdgeError::InvalidConfig { name, reason: reason.to_string() });
@@ -818,31 +907,33 @@ impl EdgeDetector {
     /// search near the run's own course (so a brighter highlight or a texture peak beside the
     /// line yields to the line), and runs shorter than `min_run` are dropped.
     pub fn detect(&mut self, image: &ImageView<'_>, out: &mut LaserLine) -> Result<DetectStats, EdgeError> {
+        let region = self.config.region(image)?;
+        let vertical = self.config.line_orientation == Orientation::Vertical;
+        let mut plane = std::mem::take(&mut self.plane);
+        let filled = fill_plane(image, self.config.channel, vertical, region.clone(), &mut plane);
+        let r = self.detect_in(image, region, filled.then_some(&plane.bytes[..]), out);
+        self.plane = plane;
+        Ok(r)
+    }
+
+    /// The detection over `region` (columns, rows) of `image`, reading the signal from `plane`
+    /// where it is given (see [`Search::plane`]).
+    fn detect_in(
+        &mut self,
+        image: &ImageView<'_>,
+        (xs, ys): (std::ops::Range<u32>, std::ops::Range<u32>),
+        plane: Option<&[u8]>,
+        out: &mut LaserLine,
+    ) -> DetectStats {
         let cfg = &self.config;
         let (w, h) = (image.width(), image.height());
-        let roi = cfg.roi;
-        if roi.x_offset >= w || roi.y_offset >= h {
-            return Err(EdgeError::RoiOutside { roi, width: w, height: h });
-        }
-        let x1 = if roi.width == 0 { w } else { (roi.x_offset + roi.width).min(w) };
-        let y1 = if roi.height == 0 { h } else { (roi.y_offset + roi.height).min(h) };
-        let (x0, y0) = (roi.x_offset, roi.y_offset);
         let enc = image.encoding();
         let vertical = cfg.line_orientation == Orientation::Vertical;
         let samples = if vertical { h } else { w };
         out.reset(cfg.line_orientation, w, h, samples as usize, enc.is_color());
-        let (outer, inner) = if vertical { (y0..y1, x0..x1) } else { (x0..x1, y0..y1) };
-        let plane = fill_plane(image, cfg.channel, vertical, (x0..x1, y0..y1), &mut self.plane);
-        let search = Search {
-            image,
-            cfg,
-            plane: plane.then_some(&self.plane.bytes[..]),
-            outer,
-            inner,
-            vertical,
-            scale: level_scale(enc),
-            saturation: enc.max_value(),
-        };
+        let (outer, inner) = if vertical { (ys, xs) } else { (xs, ys) };
+        let search =
+            Search { image, cfg, plane, outer, inner, vertical, scale: level_scale(enc), saturation: enc.max_value() };
         let mut stats = DetectStats::default();
         self.state.clear();
         self.state.resize(samples as usize, (false, None));
@@ -893,6 +984,91 @@ impl EdgeDetector {
                 let c = side_colour(image, out.u[i], out.v[i], vertical, cfg.color_offset_px);
                 out.rgb[3 * i..3 * i + 3].copy_from_slice(&c);
             }
+        }
+        stats
+    }
+}
+
+/// The lines of several lasers in one image, each in its own channel (the laser's colour
+/// against the others): one detector per laser, with the same orientation and region, and the
+/// channels of a colour frame extracted in one pass over its 3-byte pixels.
+#[derive(Debug, Default, Clone)]
+pub struct LaserDetectors {
+    detectors: Vec<EdgeDetector>,
+    /// Every laser's signal, one plane after the other (`w * h` bytes each), row-major.
+    colour: Vec<u8>,
+    /// A horizontal line's planes, transposed.
+    bytes: Vec<u8>,
+    /// One plane transposed.
+    transposed: Vec<u8>,
+}
+
+impl LaserDetectors {
+    /// One detector per configuration; they must agree on everything but the channel.
+    pub fn new(configs: Vec<EdgeConfig>) -> Result<Self, EdgeError> {
+        let mut detectors = Vec::with_capacity(configs.len());
+        for c in configs {
+            if let Some(first) = detectors.first().map(|d: &EdgeDetector| d.config()) {
+                if (EdgeConfig { channel: first.channel, ..c }) != *first {
+                    return Err(EdgeError::InvalidConfig {
+                        name: "channel",
+                        reason: "the lasers' detectors differ in more than their channel".into(),
+                    });
+                }
+            }
+            detectors.push(EdgeDetector::new(c)?);
+        }
+        Ok(Self { detectors, ..Default::default() })
+    }
+
+    /// The lasers, as many as detectors.
+    pub fn len(&self) -> usize {
+        self.detectors.len()
+    }
+
+    /// True without any laser.
+    pub fn is_empty(&self) -> bool {
+        self.detectors.is_empty()
+    }
+
+    /// Finds each laser's line in `image`, laser `k`'s into `outs[k]` (`outs` is resized to
+    /// the lasers). One laser is found as [`EdgeDetector::detect`] finds it, in any encoding;
+    /// several need a colour image.
+    pub fn detect(&mut self, image: &ImageView<'_>, outs: &mut Vec<LaserLine>) -> Result<Vec<DetectStats>, EdgeError> {
+        let n = self.detectors.len();
+        outs.resize_with(n, LaserLine::default);
+        if n == 1 {
+            return Ok(vec![self.detectors[0].detect(image, &mut outs[0])?]);
+        }
+        let enc = image.encoding();
+        if !enc.is_color() {
+            return Err(EdgeError::GreyWithLasers { encoding: enc.ros_name(), lasers: n });
+        }
+        let Some(cfg) = self.detectors.first().map(|d| d.config().clone()) else { return Ok(Vec::new()) };
+        let (xs, ys) = cfg.region(image)?;
+        let (x0, w, y0, h) = (xs.start as usize, xs.len(), ys.start as usize, ys.len());
+        let channels: Vec<Channel> = self.detectors.iter().map(|d| d.config().channel).collect();
+        let plane = w * h;
+        // Every byte is written below: the buffer is only sized, not cleared.
+        self.colour.resize(n * plane, 0);
+        let rgb = enc == Encoding::Rgb8;
+        for j in 0..h {
+            let row = &image.row((y0 + j) as u32)[3 * x0..];
+            plane::channel_rows(row, w, rgb, &channels, &mut self.colour[j * w..], plane);
+        }
+        let vertical = cfg.line_orientation == Orientation::Vertical;
+        if !vertical {
+            self.bytes.clear();
+            for k in 0..n {
+                let src = &self.colour[k * plane..(k + 1) * plane];
+                plane::transpose(h, w, |j| &src[j * w..], &mut self.transposed);
+                self.bytes.extend_from_slice(&self.transposed);
+            }
+        }
+        let planes = if vertical { &self.colour } else { &self.bytes };
+        let mut stats = Vec::with_capacity(n);
+        for (k, (d, out)) in self.detectors.iter_mut().zip(outs.iter_mut()).enumerate() {
+            stats.push(d.detect_in(image, (xs.clone(), ys.clone()), Some(&planes[k * plane..(k + 1) * plane]), out));
         }
         Ok(stats)
     }
@@ -997,9 +1173,8 @@ fn fill_profile(
                 let (r, g, b) = if enc == Encoding::Rgb8 { (px[0], px[1], px[2]) } else { (px[2], px[1], px[0]) };
                 let (r, g, b) = (f32::from(r), f32::from(g), f32::from(b));
                 match channel {
-                    Channel::Red => r,
                     Channel::Luma => crate::image::luma(r, g, b),
-                    Channel::RedMinusOthers => (r - 0.5 * (g + b)).max(0.0),
+                    c => c.of(r, g, b),
                 }
             }
         }

@@ -87,14 +87,25 @@ pub(super) fn transpose<'a>(rows: usize, cols: usize, row: impl Fn(usize) -> &'a
 fn combine(channel: Channel, r: u8x16, g: u8x16, b: u8x16) -> u8x16 {
     match channel {
         Channel::Red => r,
+        Channel::Green => g,
+        Channel::Blue => b,
         // r - (g + b) / 2 at or above zero, the half rounded down in the mean: within half a
         // level of the exact value.
-        Channel::RedMinusOthers => r.saturating_sub((g >> 1) + (b >> 1) + (g & b & u8x16::splat(1))),
+        Channel::RedMinusOthers => against(r, g, b),
+        Channel::GreenMinusOthers => against(g, r, b),
+        Channel::BlueMinusOthers => against(b, r, g),
         Channel::Luma => {
             let (r, g, b) = (r.to_array(), g.to_array(), b.to_array());
             u8x16::new(std::array::from_fn(|i| luma(r[i], g[i], b[i])))
         }
     }
+}
+
+/// `c - (a + b) / 2` at or above zero, the half rounded down in the mean: within half a level
+/// of the exact value.
+#[inline(always)]
+fn against(c: u8x16, a: u8x16, b: u8x16) -> u8x16 {
+    c.saturating_sub((a >> 1) + (b >> 1) + (a & b & u8x16::splat(1)))
 }
 
 /// Luma (0.299 R + 0.587 G + 0.114 B) rounded to a byte, in integers.
@@ -108,7 +119,11 @@ fn luma(r: u8, g: u8, b: u8) -> u8 {
 fn combine1(channel: Channel, r: u8, g: u8, b: u8) -> u8 {
     match channel {
         Channel::Red => r,
+        Channel::Green => g,
+        Channel::Blue => b,
         Channel::RedMinusOthers => r.saturating_sub(((u16::from(g) + u16::from(b)) / 2) as u8),
+        Channel::GreenMinusOthers => g.saturating_sub(((u16::from(r) + u16::from(b)) / 2) as u8),
+        Channel::BlueMinusOthers => b.saturating_sub(((u16::from(r) + u16::from(g)) / 2) as u8),
         Channel::Luma => luma(r, g, b),
     }
 }
@@ -117,8 +132,20 @@ fn combine1(channel: Channel, r: u8, g: u8, b: u8) -> u8 {
 /// `out`, one byte per pixel: 32 pixels at a time in lanes, the rest one at a time.
 pub(super) fn channel_row(px: &[u8], rgb: bool, channel: Channel, out: &mut [u8]) {
     let n = out.len().min(px.len() / 3);
+    channel_rows(px, n, rgb, &[channel], out, n);
+}
+
+/// Several channels of the first `n` 3-byte pixels of `px` in one pass: channel
+/// `channels[k]` into `out[k * stride..][..n]`. The pixels are separated into red, green and
+/// blue once per 32, and each channel made from them in lanes. Nothing is written unless `px`
+/// holds the pixels and `out` every channel's stretch.
+pub(super) fn channel_rows(px: &[u8], n: usize, rgb: bool, channels: &[Channel], out: &mut [u8], stride: usize) {
+    let Some(last) = channels.len().checked_sub(1) else { return };
+    if px.len() < 3 * n || n > stride || out.len() < last * stride + n {
+        return;
+    }
     let full = n / 32 * 32;
-    for (src, dst) in px[..3 * full].chunks_exact(96).zip(out[..full].chunks_exact_mut(32)) {
+    for (i, src) in px[..3 * full].chunks_exact(96).enumerate() {
         let v: [u8x16; 6] = std::array::from_fn(|i| load(&src[16 * i..]));
         let mut v = v;
         for _ in 0..5 {
@@ -128,12 +155,17 @@ pub(super) fn channel_row(px: &[u8], rgb: bool, channel: Channel, out: &mut [u8]
         for half in 0..2 {
             let (first, g, last) = (v[half], v[2 + half], v[4 + half]);
             let (r, b) = if rgb { (first, last) } else { (last, first) };
-            dst[16 * half..16 * half + 16].copy_from_slice(combine(channel, r, g, b).as_array());
+            for (k, &channel) in channels.iter().enumerate() {
+                let at = k * stride + 32 * i + 16 * half;
+                out[at..at + 16].copy_from_slice(combine(channel, r, g, b).as_array());
+            }
         }
     }
-    for (p, o) in px[3 * full..3 * n].chunks_exact(3).zip(&mut out[full..n]) {
+    for (i, p) in px[3 * full..3 * n].chunks_exact(3).enumerate() {
         let (r, b) = if rgb { (p[0], p[2]) } else { (p[2], p[0]) };
-        *o = combine1(channel, r, p[1], b);
+        for (k, &channel) in channels.iter().enumerate() {
+            out[k * stride + full + i] = combine1(channel, r, p[1], b);
+        }
     }
 }
 
@@ -178,23 +210,30 @@ mod tests {
         for n in [0, 1, 31, 32, 33, 64, 100, 640] {
             let px = bytes(3 * n, n as u64);
             for rgb in [true, false] {
-                for channel in [Channel::Red, Channel::RedMinusOthers, Channel::Luma] {
+                for channel in super::super::CHANNELS {
                     let mut out = vec![0u8; n];
                     channel_row(&px, rgb, channel, &mut out);
                     for (i, p) in px.chunks_exact(3).enumerate() {
                         let (r, g, b) = if rgb { (p[0], p[1], p[2]) } else { (p[2], p[1], p[0]) };
-                        let (r, g, b) = (f32::from(r), f32::from(g), f32::from(b));
-                        let exact = match channel {
-                            Channel::Red => r,
-                            Channel::RedMinusOthers => (r - 0.5 * (g + b)).max(0.0),
-                            Channel::Luma => 0.299 * r + 0.587 * g + 0.114 * b,
-                        };
+                        let exact = channel.of(f32::from(r), f32::from(g), f32::from(b));
                         let got = f32::from(out[i]);
                         assert!((got - exact).abs() <= 0.51, "{channel:?} rgb {rgb} n {n} px {i}: {got} vs {exact}");
-                        if channel == Channel::Red {
+                        if matches!(channel, Channel::Red | Channel::Green | Channel::Blue) {
                             assert_eq!(got, exact);
                         }
                     }
+                }
+                // Three channels in one pass: each as it is alone, in its own stretch of the
+                // output (stride beyond the row: the rest left as it was).
+                let three = [Channel::RedMinusOthers, Channel::GreenMinusOthers, Channel::BlueMinusOthers];
+                let stride = n + 5;
+                let mut all = vec![7u8; 3 * stride];
+                channel_rows(&px, n, rgb, &three, &mut all, stride);
+                for (k, &channel) in three.iter().enumerate() {
+                    let mut one = vec![0u8; n];
+                    channel_row(&px, rgb, channel, &mut one);
+                    assert_eq!(&all[k * stride..k * stride + n], &one[..], "{channel:?} n {n}");
+                    assert!(all[k * stride + n..(k + 1) * stride].iter().all(|&b| b == 7));
                 }
             }
         }

@@ -7,10 +7,12 @@ pub mod scene;
 pub mod xray;
 
 use crate::camera::CameraModel;
+use crate::edge::LaserColor;
 use crate::geom::{Iso3, Plane, Vec3};
 use crate::image::{Encoding, Image};
 use crate::pose::table_from_carm;
 use crate::rig::Rig;
+use crate::rig::MAX_LASERS;
 pub use scene::{Scene, SCENE_NAMES};
 
 /// The laser fan beam's appearance.
@@ -33,6 +35,16 @@ impl Default for LaserModel {
 }
 
 impl LaserModel {
+    /// The colour a colour camera sees of a laser of colour `c` (linear RGB weights): the
+    /// red of [`LaserModel::rgb`], and for green and blue lasers the crosstalk of a Bayer
+    /// sensor's filters into the other channels.
+    pub fn rgb_of(&self, c: LaserColor) -> [f64; 3] {
+        match c {
+            LaserColor::Red => self.rgb,
+            LaserColor::Green => [0.10, 1.0, 0.18],
+            LaserColor::Blue => [0.06, 0.22, 1.0],
+        }
+    }
     /// The laser of the `hard` preset: a sheet thinner than a pixel at 320x240 (its image is
     /// about a third of a pixel wide before the optics blur it), bright enough to saturate on
     /// white surfaces.
@@ -239,7 +251,16 @@ pub struct Scanner {
     /// The scan.
     pub settings: ScanSettings,
     cams: Vec<CamState>,
+    /// The lasers' sheets: the rig's `lasers`, or its single `laser_plane`.
+    sheets: Vec<Sheet>,
+}
+
+/// One laser's sheet of light, fixed in `carm`.
+#[derive(Debug, Clone, Copy)]
+struct Sheet {
     plane_carm: Plane,
+    source: Vec3,
+    rgb: [f64; 3],
 }
 
 /// SplitMix64: a tiny deterministic generator for noise and jitter.
@@ -310,9 +331,17 @@ impl Scanner {
             Some(a) => return bad("dark_albedo", format!("{a} is not in [0, 1]")),
             None => scene,
         };
-        let Some(plane_carm) = Plane::from_params(rig.laser_plane) else {
-            return bad("laser_plane", format!("{:?} is degenerate", rig.laser_plane));
-        };
+        if let Err(e) = crate::rig::validate_lasers(&rig.lasers) {
+            return bad("lasers", e);
+        }
+        let mut sheets = Vec::new();
+        for l in rig.effective_lasers() {
+            let Some(plane_carm) = Plane::from_params(l.plane) else {
+                return bad("laser_plane", format!("{:?} is degenerate", l.plane));
+            };
+            let rgb = if rig.lasers.is_empty() { laser.rgb } else { laser.rgb_of(l.channel) };
+            sheets.push(Sheet { plane_carm, source: Vec3::from_array(l.source), rgb });
+        }
         let mut cams = Vec::new();
         for c in &rig.cameras {
             let model = c.model().map_err(|source| SynthError::Camera { name: c.name.clone(), source })?;
@@ -329,7 +358,12 @@ impl Scanner {
             }
             cams.push(CamState { model, carm_from_optical: c.carm_from_optical(), corners });
         }
-        Ok(Self { scene, rig, laser, settings, cams, plane_carm })
+        Ok(Self { scene, rig, laser, settings, cams, sheets })
+    }
+
+    /// The number of lasers (sheets) rendered.
+    pub fn lasers(&self) -> usize {
+        self.sheets.len()
     }
 
     /// Index of the rig camera called `name`.
@@ -399,19 +433,29 @@ impl Scanner {
         let c = &self.cams[cam];
         let (w, h) = (c.model.width as usize, c.model.height as usize);
         let table_from_optical = pose.compose(&c.carm_from_optical);
-        let plane = self.plane_carm.transformed(&pose);
         let realism = &self.settings.realism;
+        let sheets = self
+            .sheets
+            .iter()
+            .map(|sh| {
+                let plane = sh.plane_carm.transformed(&pose);
+                CtxSheet {
+                    plane,
+                    source: pose.transform_point(sh.source),
+                    // The sheet moves along the travel (table Y) during the exposure: across
+                    // the plane, its profile is the Gaussian convolved with a box of this
+                    // half-width.
+                    smear_m: 0.5 * self.settings.speed_mps * realism.exposure_s * plane.normal.y.abs(),
+                }
+            })
+            .collect();
         let ctx = RenderCtx {
             scanner: self,
             origin: table_from_optical.translation,
             rot: table_from_optical,
-            plane,
-            source: pose.transform_point(Vec3::from_array(self.rig.laser_source)),
+            sheets,
             carm_from_table: pose.inverse(),
             laser_on,
-            // The sheet moves along the travel (table Y) during the exposure: across the plane,
-            // its profile is the Gaussian convolved with a box of this half-width.
-            smear_m: 0.5 * self.settings.speed_mps * realism.exposure_s * plane.normal.y.abs(),
             room_light: Vec3::new(0.2, -0.5, 1.0).try_normalize().unwrap_or(Vec3::Z),
         };
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(8);
@@ -424,7 +468,7 @@ impl Scanner {
                 s.spawn(move || {
                     for (i, px) in chunk.iter_mut().enumerate() {
                         let (x, y) = (i % w, k * rows_per + i / w);
-                        *px = ctx.shade(c.ray_at(w, x as f64 + 0.5, y as f64 + 0.5));
+                        *px = ctx.shade(c.ray_at(w, x as f64 + 0.5, y as f64 + 0.5)).compact();
                     }
                 });
             }
@@ -490,54 +534,87 @@ impl Scanner {
         if !ctx.laser_on {
             return (s0.rgb, [0.0; 3]);
         }
-        let d = |xx: usize, yy: usize| center[yy * w + xx].plane_dist;
-        let d0 = s0.plane_dist;
-        // The plane distance's change per pixel, from the smaller one-sided difference in each
-        // direction (so that a depth edge beside the pixel does not count).
-        let one_sided = |a: Option<f64>, b: Option<f64>| {
-            [a, b].into_iter().flatten().map(|v| (v - d0).abs()).filter(|v| v.is_finite()).fold(f64::INFINITY, f64::min)
-        };
-        let gx = one_sided(x.checked_sub(1).map(|xx| d(xx, y)), (x + 1 < w).then(|| d(x + 1, y)));
-        let gy = one_sided(y.checked_sub(1).map(|yy| d(x, yy)), (y + 1 < h).then(|| d(x, y + 1)));
-        let g = [gx, gy].into_iter().filter(|v| v.is_finite()).map(|v| v * v).sum::<f64>().sqrt();
         let sigma = self.laser.sheet_sigma_m;
-        let sheet = (sigma * sigma + (self.settings.realism.psf_sigma_px * g).powi(2)).sqrt();
-        let sigma_eff = (sheet * sheet + ctx.smear_m.powi(2) / 3.0).sqrt();
-        let band = 4.0 * sigma_eff + ctx.smear_m;
-        let mut near = false;
-        for yy in y.saturating_sub(1)..(y + 2).min(h) {
-            for xx in x.saturating_sub(1)..(x + 2).min(w) {
-                let dv = d(xx, yy);
-                near |= dv.abs() < band || (dv.is_finite() && d0.is_finite() && dv.signum() != d0.signum());
+        // Per laser: its sheet widened by the optics, and whether it passes near this pixel.
+        let mut sheet = [sigma; MAX_LASERS];
+        let mut n = 0;
+        for (k, sh) in ctx.sheets.iter().enumerate() {
+            let d = |xx: usize, yy: usize| center[yy * w + xx].plane_dist[k];
+            let d0 = s0.plane_dist[k];
+            // The plane distance's change per pixel, from the smaller one-sided difference in
+            // each direction (so that a depth edge beside the pixel does not count).
+            let one_sided = |a: Option<f64>, b: Option<f64>| {
+                [a, b]
+                    .into_iter()
+                    .flatten()
+                    .map(|v| (v - d0).abs())
+                    .filter(|v| v.is_finite())
+                    .fold(f64::INFINITY, f64::min)
+            };
+            let gx = one_sided(x.checked_sub(1).map(|xx| d(xx, y)), (x + 1 < w).then(|| d(x + 1, y)));
+            let gy = one_sided(y.checked_sub(1).map(|yy| d(x, yy)), (y + 1 < h).then(|| d(x, y + 1)));
+            let g = [gx, gy].into_iter().filter(|v| v.is_finite()).map(|v| v * v).sum::<f64>().sqrt();
+            sheet[k] = (sigma * sigma + (self.settings.realism.psf_sigma_px * g).powi(2)).sqrt();
+            let sigma_eff = (sheet[k] * sheet[k] + sh.smear_m.powi(2) / 3.0).sqrt();
+            let band = 4.0 * sigma_eff + sh.smear_m;
+            let mut near = false;
+            for yy in y.saturating_sub(1)..(y + 2).min(h) {
+                for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                    let dv = d(xx, yy);
+                    near |= dv.abs() < band || (dv.is_finite() && d0.is_finite() && dv.signum() != d0.signum());
+                }
+            }
+            if near {
+                // Sub-samples a side: four across the sheet's standard deviation in the image.
+                n = n.max(((4.0 * g / sigma_eff).ceil() as usize).clamp(self.settings.supersample as usize, 16));
             }
         }
-        if !near {
+        if n == 0 {
             return (s0.rgb, s0.laser);
         }
-        // Sub-samples a side: four across the sheet's standard deviation in the image.
-        let n = ((4.0 * g / sigma_eff).ceil() as usize).clamp(self.settings.supersample as usize, 16);
-        let (mut ambient, mut laser) = ([0.0; 3], [0.0; 3]);
+        let mut ambient = [0.0; 3];
+        let mut laser = [[0.0; 3]; MAX_LASERS];
         for sy in 0..n {
             for sx in 0..n {
                 let (u, v) = (x as f64 + (sx as f64 + 0.5) / n as f64, y as f64 + (sy as f64 + 0.5) / n as f64);
-                let s = ctx.shade_with(c.ray_at(w, u, v), sheet);
+                let s = ctx.shade_with(c.ray_at(w, u, v), &sheet);
                 for k in 0..3 {
                     ambient[k] += s.rgb[k];
-                    laser[k] += s.laser[k];
+                    for (l, acc) in laser.iter_mut().enumerate().take(ctx.sheets.len()) {
+                        acc[k] += s.laser[l][k];
+                    }
                 }
             }
         }
         let k = self.settings.realism.speckle_contrast;
         let speckle = if k > 0.0 { (1.0 + k * rng.normal()).max(0.0) } else { 1.0 };
-        // The widened sheet keeps the laser's energy.
-        let f = speckle * sigma / sheet / (n * n) as f64;
-        (ambient.map(|a| a / (n * n) as f64), laser.map(|l| l * f))
+        // Each widened sheet keeps its laser's energy.
+        let mut total = [0.0; 3];
+        for (l, light) in laser.iter().enumerate().take(ctx.sheets.len()) {
+            let f = speckle * sigma / sheet[l] / (n * n) as f64;
+            for c in 0..3 {
+                total[c] += light[c] * f;
+            }
+        }
+        (ambient.map(|a| a / (n * n) as f64), total)
     }
 
     /// The points on the laser sheet that camera `cam` can observe in frame `index`, in `table`:
     /// lit by the source within the fan, in the image, not occluded, facing the camera and not
     /// grazing the plane by less than `min_ray_plane_angle_deg`. Sampled every ~0.5 mm.
     pub fn observable_points(&self, cam: usize, index: u32, min_ray_plane_angle_deg: f64) -> Vec<Vec3> {
+        (0..self.sheets.len()).flat_map(|l| self.observable_points_of(cam, l, index, min_ray_plane_angle_deg)).collect()
+    }
+
+    /// The same for laser `laser` alone (an index into the rig's effective lasers).
+    pub fn observable_points_of(
+        &self,
+        cam: usize,
+        laser: usize,
+        index: u32,
+        min_ray_plane_angle_deg: f64,
+    ) -> Vec<Vec3> {
+        let Some(sheet) = self.sheets.get(laser) else { return Vec::new() };
         let ft = self.frame_time(index);
         if !ft.laser_on {
             return Vec::new();
@@ -547,15 +624,15 @@ impl Scanner {
         let table_from_optical = pose.compose(&c.carm_from_optical);
         let optical_from_table = table_from_optical.inverse();
         let eye = table_from_optical.translation;
-        let src_c = Vec3::from_array(self.rig.laser_source);
+        let src_c = sheet.source;
         let src = pose.transform_point(src_c);
-        let n = self.plane_carm.normal;
+        let n = sheet.plane_carm.normal;
         let Some(down) = (-Vec3::Z - n * (-Vec3::Z).dot(n)).try_normalize() else { return Vec::new() };
         let across = n.cross(down);
         let fan = self.laser.fan_half_angle_deg.to_radians();
         let step = 0.0005 / src_c.z.abs().max(0.1);
         let min_sin = min_ray_plane_angle_deg.to_radians().sin();
-        let plane_t = self.plane_carm.transformed(&pose);
+        let plane_t = sheet.plane_carm.transformed(&pose);
         let mut out = Vec::new();
         let mut a = -fan;
         while a <= fan {
@@ -598,48 +675,78 @@ impl CamState {
     }
 }
 
+/// A centre ray's light: what every sub-sample decision reads.
 #[derive(Debug, Clone, Copy)]
 struct Shade {
     /// Everything but the laser: ambient and room light, highlights.
     rgb: [f64; 3],
-    /// The laser's light.
+    /// The lasers' light.
     laser: [f64; 3],
-    plane_dist: f64,
+    /// Signed distance from each laser's plane (NaN: no hit, or no such laser).
+    plane_dist: [f64; MAX_LASERS],
 }
 impl Default for Shade {
     fn default() -> Self {
-        Self { rgb: [0.0; 3], laser: [0.0; 3], plane_dist: f64::NAN }
+        Self { rgb: [0.0; 3], laser: [0.0; 3], plane_dist: [f64::NAN; MAX_LASERS] }
     }
+}
+
+/// One ray's light with each laser's apart.
+#[derive(Debug, Clone, Copy)]
+struct RayShade {
+    rgb: [f64; 3],
+    laser: [[f64; 3]; MAX_LASERS],
+    plane_dist: [f64; MAX_LASERS],
+}
+impl Default for RayShade {
+    fn default() -> Self {
+        Self { rgb: [0.0; 3], laser: [[0.0; 3]; MAX_LASERS], plane_dist: [f64::NAN; MAX_LASERS] }
+    }
+}
+impl RayShade {
+    fn compact(&self) -> Shade {
+        let mut laser = self.laser[0];
+        for l in &self.laser[1..] {
+            for k in 0..3 {
+                laser[k] += l[k];
+            }
+        }
+        Shade { rgb: self.rgb, laser, plane_dist: self.plane_dist }
+    }
+}
+
+/// One laser's sheet in `table` for one frame.
+struct CtxSheet {
+    plane: Plane,
+    source: Vec3,
+    /// Half-width of the sheet's motion during the exposure, metres across the plane.
+    smear_m: f64,
 }
 
 struct RenderCtx<'a> {
     scanner: &'a Scanner,
     origin: Vec3,
     rot: Iso3,
-    plane: Plane,
-    source: Vec3,
+    sheets: Vec<CtxSheet>,
     carm_from_table: Iso3,
     laser_on: bool,
-    /// Half-width of the sheet's motion during the exposure, metres across the plane.
-    smear_m: f64,
     /// Direction towards the room light, in `table`.
     room_light: Vec3,
 }
 
 impl RenderCtx<'_> {
-    fn shade(&self, ray_optical: Vec3) -> Shade {
-        self.shade_with(ray_optical, self.scanner.laser.sheet_sigma_m)
+    fn shade(&self, ray_optical: Vec3) -> RayShade {
+        self.shade_with(ray_optical, &[self.scanner.laser.sheet_sigma_m; MAX_LASERS])
     }
 
-    /// The shade with the sheet's standard deviation `sigma` (metres, peak 1 on its plane).
-    fn shade_with(&self, ray_optical: Vec3, sigma: f64) -> Shade {
+    /// The shade with each sheet's standard deviation `sigma[k]` (metres, peak 1 on its plane).
+    fn shade_with(&self, ray_optical: Vec3, sigma: &[f64; MAX_LASERS]) -> RayShade {
         let s = self.scanner;
         let dir = self.rot.transform_vector(ray_optical);
-        let Some(hit) = s.scene.intersect(self.origin, dir, 1e-6, 20.0) else { return Shade::default() };
+        let Some(hit) = s.scene.intersect(self.origin, dir, 1e-6, 20.0) else { return RayShade::default() };
         let p = self.origin + dir * hit.t;
         let obj = &s.scene.objects[hit.object];
         let albedo = s.scene.albedo(hit.object, p);
-        let plane_dist = self.plane.signed_distance(p);
         let r = &s.settings.realism;
         let mut diffuse = s.settings.ambient_level * albedo * (0.45 + 0.55 * hit.normal.z.max(0.0));
         let mut gloss = 0.0;
@@ -653,29 +760,37 @@ impl RenderCtx<'_> {
                 gloss = r.room_light_level * r.specular * reflected.dot(to_eye).max(0.0).powf(r.shininess);
             }
         }
-        let mut laser = 0.0;
-        if self.laser_on && plane_dist.abs() < 6.0 * sigma + self.smear_m {
-            let to_src = self.source - p;
-            let cos_inc = hit.normal.dot(to_src) / to_src.norm();
-            let v = self.carm_from_table.transform_vector(-to_src);
-            let pc = s.plane_carm.normal;
-            let in_plane = v - pc * v.dot(pc);
-            let down = (-Vec3::Z - pc * (-Vec3::Z).dot(pc)).try_normalize().unwrap_or(-Vec3::Z);
-            let within_fan = in_plane.dot(down) >= in_plane.norm() * s.laser.fan_half_angle_deg.to_radians().cos();
-            if cos_inc > 0.0 && within_fan && !s.scene.occluded(p, self.source, 1e-6) {
-                laser = s.laser.peak_level * albedo * cos_inc * sheet_profile(plane_dist, sigma, self.smear_m);
+        let mut out = RayShade::default();
+        let lum = 0.299 * obj.color[0] + 0.587 * obj.color[1] + 0.114 * obj.color[2];
+        for (k, sh) in self.sheets.iter().enumerate() {
+            let plane_dist = sh.plane.signed_distance(p);
+            out.plane_dist[k] = plane_dist;
+            let mut laser = 0.0;
+            if self.laser_on && plane_dist.abs() < 6.0 * sigma[k] + sh.smear_m {
+                let to_src = sh.source - p;
+                let cos_inc = hit.normal.dot(to_src) / to_src.norm();
+                let v = self.carm_from_table.transform_vector(-to_src);
+                let pc = s.sheets[k].plane_carm.normal;
+                let in_plane = v - pc * v.dot(pc);
+                let down = (-Vec3::Z - pc * (-Vec3::Z).dot(pc)).try_normalize().unwrap_or(-Vec3::Z);
+                let within_fan = in_plane.dot(down) >= in_plane.norm() * s.laser.fan_half_angle_deg.to_radians().cos();
+                if cos_inc > 0.0 && within_fan && !s.scene.occluded(p, sh.source, 1e-6) {
+                    laser = s.laser.peak_level * albedo * cos_inc * sheet_profile(plane_dist, sigma[k], sh.smear_m);
+                }
             }
+            let rgb = s.sheets[k].rgb;
+            out.laser[k] = if s.settings.encoding.is_color() {
+                [0, 1, 2].map(|c| laser * rgb[c] * obj.color[c])
+            } else {
+                [laser * lum; 3]
+            };
         }
-        let (rgb, laser) = if s.settings.encoding.is_color() {
-            (
-                [0, 1, 2].map(|k| diffuse * obj.color[k] + gloss),
-                [0, 1, 2].map(|k| laser * s.laser.rgb[k] * obj.color[k]),
-            )
+        out.rgb = if s.settings.encoding.is_color() {
+            [0, 1, 2].map(|k| diffuse * obj.color[k] + gloss)
         } else {
-            let lum = 0.299 * obj.color[0] + 0.587 * obj.color[1] + 0.114 * obj.color[2];
-            ([diffuse * lum + gloss; 3], [laser * lum; 3])
+            [diffuse * lum + gloss; 3]
         };
-        Shade { rgb, laser, plane_dist }
+        out
     }
 }
 
