@@ -270,3 +270,44 @@ fn robot_laser_line_survives_the_rejection_of_contradicted_points() {
     // Measured: 40 of 47 320 (0.08 %), single samples where the JPEG line jitters by 1-2 rows.
     assert!(rejected as f64 <= 0.005 * found as f64, "{rejected} of {found} rejected");
 }
+
+/// Several lasers on real frames: the red lines of the robot (floor clutter, JPEG) and of the
+/// Ciclop (white plaster, saturated) read by a three-laser detector (red, green and blue, each
+/// against the others, every channel extracted in one pass): the red laser's line is the
+/// single detector's to the bit, and the green and blue lasers, which are not there, find
+/// nothing on the red line (no crosstalk into the other colours). They do find the scene's own
+/// green and blue edges (17 to 100 samples a frame, as printed): colour alone does not tell a
+/// laser from a coloured object.
+#[test]
+fn three_laser_detector_on_real_red_lines() {
+    use xsurf_core::edge::{LaserColor, LaserDetectors};
+    let three = |base: EdgeConfig| {
+        let cfgs = [LaserColor::Red, LaserColor::Green, LaserColor::Blue]
+            .map(|c| EdgeConfig { channel: Channel::against_others(c), ..base.clone() })
+            .to_vec();
+        LaserDetectors::new(cfgs).unwrap()
+    };
+    let mut frames: Vec<(String, Image, EdgeConfig)> =
+        (2..=86).step_by(12).map(|n| (format!("robot {n}"), robot_frame(n), robot_camera())).collect();
+    for name in ["laser.png", "pattern-laser-0-255-255-8.png"] {
+        let cfg = EdgeConfig { channel: Channel::RedMinusOthers, ..ciclop_camera(Method::Gaussian) };
+        frames.push((format!("ciclop {name}"), read_frame(&ciclop(name)).unwrap(), cfg));
+    }
+    for (name, img, cfg) in frames {
+        let mut d = three(cfg.clone());
+        let mut lines = Vec::new();
+        d.detect(&img.view().unwrap(), &mut lines).unwrap();
+        let alone = detect(&img, cfg);
+        let found: Vec<usize> = lines.iter().map(LaserLine::found).collect();
+        eprintln!("{name}: red {} (alone {}), green {}, blue {}", found[0], alone.found(), found[1], found[2]);
+        assert!(alone.found() > 200, "{name}: the red line itself");
+        let bits = |l: &LaserLine| l.u.iter().chain(&l.v).map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&lines[0]), bits(&alone), "{name}: red as the single detector finds it");
+        // No crosstalk: a sample of the green or blue laser is never on the red line (those
+        // there are are the scene's own green and blue edges, far from it).
+        for (k, l) in lines.iter().enumerate().skip(1) {
+            let on_red = (0..l.len()).filter(|&i| (l.across(i) - lines[0].across(i)).abs() <= 5.0).count();
+            assert_eq!(on_red, 0, "{name}: laser {k} on the red line in {on_red} samples");
+        }
+    }
+}

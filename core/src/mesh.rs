@@ -83,6 +83,59 @@ impl Grid {
         }
         g
     }
+    /// The grid of samples `rows` of every frame: one laser's block of a grid that stacks
+    /// several lasers' samples (`blocks`).
+    pub fn rows(&self, rows: std::ops::Range<usize>) -> Grid {
+        let rows = rows.start.min(self.samples)..rows.end.min(self.samples);
+        let mut g = Grid::new(rows.len());
+        for f in 0..self.frames() {
+            let at = f * self.samples + rows.start..f * self.samples + rows.end;
+            let p = Profile {
+                points: self.points[at.clone()].to_vec(),
+                intensity: self.intensity[at.clone()].to_vec(),
+                rgb: self.has_rgb.then(|| self.rgb[at.clone()].to_vec()),
+                range: self.range[at].to_vec(),
+                ..Default::default()
+            };
+            // Same lengths by construction.
+            let _ = g.push(self.stamps_ns[f], &p);
+        }
+        g
+    }
+    /// The grid split into `blocks` grids of equal samples per frame, block `k` holding samples
+    /// `k * n..(k + 1) * n`: a scanner's lasers, one grid each. One block is the grid itself.
+    pub fn blocks(&self, blocks: usize) -> Vec<Grid> {
+        if blocks <= 1 {
+            return vec![self.clone()];
+        }
+        let n = self.samples / blocks;
+        (0..blocks).map(|k| self.rows(k * n..(k + 1) * n)).collect()
+    }
+    /// Grids of the same frames stacked sample by sample, the inverse of [`Grid::blocks`].
+    pub fn stacked(grids: &[Grid]) -> Grid {
+        if let [one] = grids {
+            return one.clone();
+        }
+        let samples = grids.iter().map(|g| g.samples).sum();
+        let mut out = Grid::new(samples);
+        let frames = grids.iter().map(Grid::frames).min().unwrap_or(0);
+        let has_rgb = grids.iter().any(|g| g.has_rgb);
+        for f in 0..frames {
+            let mut p = Profile { rgb: has_rgb.then(Vec::new), ..Default::default() };
+            for g in grids {
+                let at = f * g.samples..(f + 1) * g.samples;
+                p.points.extend_from_slice(&g.points[at.clone()]);
+                p.intensity.extend_from_slice(&g.intensity[at.clone()]);
+                p.range.extend_from_slice(&g.range[at.clone()]);
+                if let Some(rgb) = p.rgb.as_mut() {
+                    rgb.extend_from_slice(&g.rgb[at]);
+                }
+            }
+            // Same lengths by construction.
+            let _ = out.push(grids[0].stamps_ns[f], &p);
+        }
+        out
+    }
     /// Point at sample `s` of frame `f`.
     pub fn point(&self, s: usize, f: usize) -> [f32; 3] {
         self.points[f * self.samples + s]
@@ -1074,5 +1127,17 @@ mod tests {
         assert_eq!(mesh.triangles.len(), 2 * 38 * 29, "the cells across the jump are refused, the others kept");
         // An isotropic grid keeps the study's rule exactly.
         assert!(GridShape::of(&flat_grid(20, 20, 0.001, 0.0012), cfg.max_edge_m).is_none());
+    }
+    /// A stacked grid split into its blocks and stacked again is itself; each block holds its
+    /// own samples.
+    #[test]
+    fn blocks_split_and_stack_back() {
+        let g = surface(30, 7, 0.001, 0.002, 0.0, |x, y| x + y);
+        let b = g.blocks(3);
+        assert_eq!(b.iter().map(Grid::samples).collect::<Vec<_>>(), vec![10, 10, 10]);
+        assert_eq!(b[1].point(4, 5), g.point(14, 5));
+        assert_eq!(b[2].stamps_ns(), g.stamps_ns());
+        assert_eq!(Grid::stacked(&b), g);
+        assert_eq!(g.blocks(1), vec![g.clone()]);
     }
 }

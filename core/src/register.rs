@@ -666,6 +666,26 @@ pub fn refine_grid(
     Ok(report)
 }
 
+/// Moves a grid of a camera from one placement (`from`, the one it was triangulated through)
+/// to another (`to`, a refined one): each point's ray is recovered through `from` and
+/// intersected again with its laser's `plane` through `to`, as [`refine_grid`] does for the grid
+/// it refines. The further lasers' grids of a refined camera follow it this way.
+pub fn retriangulate_grid(
+    grid: &mut Grid,
+    from: &Iso3,
+    to: &Iso3,
+    plane: &Plane,
+    motion: &ScanMotion,
+    max_spread_m: f64,
+) -> Result<(), RefineError> {
+    let measured = grid_observations(grid.points(), grid.samples(), from, plane, motion, max_spread_m)?;
+    let points = grid.points_mut();
+    for (i, o) in measured {
+        points[i] = o.triangulate(to, plane).map_or([f32::NAN; 3], |p| [p.x as f32, p.y as f32, p.z as f32]);
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -736,6 +756,25 @@ mod tests {
         pts.push([f32::NAN; 3]);
         pts.push([f32::NAN; 3]);
         pts.push([f32::NAN; 3]);
+        // Moved to another placement and back, each point returns where it was.
+        let mut g = Grid::new(3);
+        for col in pts.chunks(3).take(2) {
+            let p = crate::triangulate::Profile {
+                points: col.to_vec(),
+                intensity: vec![0.0; 3],
+                range: vec![0.0; 3],
+                ..Default::default()
+            };
+            g.push(0, &p).unwrap();
+        }
+        let moved = corrected(&e, &[0.002, -0.001, 0.003, 0.001, 0.0, -0.002]);
+        let before = g.clone();
+        retriangulate_grid(&mut g, &e, &moved, &plane, &motion, 1e-4).unwrap();
+        assert!(g.points().iter().zip(before.points()).any(|(a, b)| (a[2] - b[2]).abs() > 1e-4), "moved");
+        retriangulate_grid(&mut g, &moved, &e, &plane, &motion, 1e-4).unwrap();
+        for (a, b) in g.points().iter().zip(before.points()) {
+            assert!((0..3).all(|k| (a[k] - b[k]).abs() < 1e-5), "{a:?} vs {b:?}");
+        }
         let obs = grid_observations(&pts, 3, &e, &plane, &motion, 1e-4).unwrap();
         assert_eq!(obs.iter().map(|o| o.0).collect::<Vec<_>>(), [0, 1, 2, 3, 4, 5]);
         for (i, o) in &obs {

@@ -115,6 +115,14 @@ pub struct Rig {
     pub cameras: Vec<RigCamera>,
 }
 
+/// The tilt of [`Rig::three_lasers`]' side planes from the vertical, degrees.
+pub const TILT_DEG: f64 = 25.0;
+
+/// Where [`Rig::three_lasers`]' side planes meet the tabletop: this far either side of the
+/// collimator's line, so that the three lines never meet below 0.3 m (where they would add up
+/// to white, and no colour would tell them apart).
+pub const TILTED_TABLE_Y_M: f64 = 0.08;
+
 /// At most this many lasers: each needs a colour of its own (red, green, blue).
 pub const MAX_LASERS: usize = 3;
 
@@ -224,7 +232,7 @@ impl Rig {
     /// A three-laser scanner (the study's recommendation of more fan beams): the collimator's
     /// plane (red, vertical, as [`Rig::study`]'s) and two planes tilted 25 degrees about the
     /// table's X axis, one from each side of the travel (green from -Y, blue from +Y), meeting
-    /// the tabletop under the collimator's line. Each lights the upright faces across the travel
+    /// the tabletop [`TILTED_TABLE_Y_M`] either side of the collimator's line. Each lights the upright faces across the travel
     /// on its side, which the collimator's plane only grazes. The cameras look from 45 degrees
     /// (the study's preferred angle, section 6.1), so that each views the tilted plane on its
     /// side at 20 degrees and the collimator's at 45.
@@ -242,8 +250,17 @@ impl Rig {
             cam("cam1", Vec3::new(-0.20, -0.62, 0.67), Vec3::X),
             cam("cam2", Vec3::new(0.20, 0.62, 0.67), -Vec3::X),
         ];
-        let (s, c) = 25f64.to_radians().sin_cos();
-        let height_m = 1.0;
+        let (s, c) = TILT_DEG.to_radians().sin_cos();
+        // A plane tilted about X through (0, y0, 0) on the tabletop, its source 1 m up.
+        let tilted = |name: &str, sign: f64, channel| {
+            let y0 = sign * TILTED_TABLE_Y_M;
+            RigLaser {
+                name: name.into(),
+                plane: [0.0, c, -sign * s, c * y0],
+                source: [0.0, y0 + sign * s / c, 1.0],
+                channel,
+            }
+        };
         rig.lasers = vec![
             RigLaser {
                 name: "collimator".into(),
@@ -251,18 +268,8 @@ impl Rig {
                 source: rig.laser_source,
                 channel: LaserColor::Red,
             },
-            RigLaser {
-                name: "left".into(),
-                plane: [0.0, c, s, 0.0],
-                source: [0.0, -height_m * s / c, height_m],
-                channel: LaserColor::Green,
-            },
-            RigLaser {
-                name: "right".into(),
-                plane: [0.0, c, -s, 0.0],
-                source: [0.0, height_m * s / c, height_m],
-                channel: LaserColor::Blue,
-            },
+            tilted("left", -1.0, LaserColor::Green),
+            tilted("right", 1.0, LaserColor::Blue),
         ];
         rig
     }

@@ -16,6 +16,8 @@ pub struct CloudPoint {
     pub intensity: Option<f32>,
     /// Colour 0x00RRGGBB, if the cloud has it.
     pub rgb: Option<u32>,
+    /// The laser that lit it (an index into the `lasers` parameter), if the cloud has it.
+    pub laser: Option<f32>,
 }
 
 /// Why a cloud cannot be read.
@@ -61,29 +63,61 @@ pub fn build(
     width: u32,
     mut point: impl FnMut(usize, usize) -> ([f32; 3], f32, u32),
 ) -> PointCloud2 {
+    build_fields(header, height, width, false, |r, c| {
+        let (p, i, rgb) = point(r, c);
+        (p, i, rgb, 0.0)
+    })
+}
+
+/// The same with a fourth field `laser` (FLOAT32, the index into the `lasers` parameter of the
+/// laser that lit the point): the clouds of a scanner with several lasers.
+pub fn build_with_laser(
+    header: Header,
+    height: u32,
+    width: u32,
+    point: impl FnMut(usize, usize) -> ([f32; 3], f32, u32, f32),
+) -> PointCloud2 {
+    build_fields(header, height, width, true, point)
+}
+
+fn build_fields(
+    header: Header,
+    height: u32,
+    width: u32,
+    laser: bool,
+    mut point: impl FnMut(usize, usize) -> ([f32; 3], f32, u32, f32),
+) -> PointCloud2 {
+    let step = if laser { POINT_STEP + 4 } else { POINT_STEP };
     let n = height as usize * width as usize;
-    let mut data = Vec::with_capacity(n * POINT_STEP as usize);
+    let mut data = Vec::with_capacity(n * step as usize);
     let mut dense = true;
     for r in 0..height as usize {
         for c in 0..width as usize {
-            let (p, i, rgb) = point(r, c);
+            let (p, i, rgb, l) = point(r, c);
             dense &= p.iter().all(|v| v.is_finite());
             for v in p {
                 data.extend_from_slice(&v.to_le_bytes());
             }
             data.extend_from_slice(&i.to_le_bytes());
             data.extend_from_slice(&f32::from_bits(rgb).to_le_bytes());
+            if laser {
+                data.extend_from_slice(&l.to_le_bytes());
+            }
         }
     }
     let field = |name: &str, offset| PointField { name: name.into(), offset, datatype: PointField::FLOAT32, count: 1 };
+    let mut fields = vec![field("x", 0), field("y", 4), field("z", 8), field("intensity", 12), field("rgb", 16)];
+    if laser {
+        fields.push(field("laser", 20));
+    }
     PointCloud2 {
         header,
         height,
         width,
-        fields: vec![field("x", 0), field("y", 4), field("z", 8), field("intensity", 12), field("rgb", 16)],
+        fields,
         is_bigendian: false,
-        point_step: POINT_STEP,
-        row_step: POINT_STEP * width,
+        point_step: step,
+        row_step: step * width,
         data,
         is_dense: dense,
     }
@@ -125,7 +159,7 @@ pub fn read(cloud: &PointCloud2) -> Result<Vec<CloudPoint>, CloudError> {
         }
     };
     let (ox, oy, oz) = (offset("x", true)?, offset("y", true)?, offset("z", true)?);
-    let (oi, oc) = (offset("intensity", false)?, offset("rgb", false)?);
+    let (oi, oc, ol) = (offset("intensity", false)?, offset("rgb", false)?, offset("laser", false)?);
     let f = |b: &[u8], o: usize| f32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]]);
     let mut out = Vec::with_capacity(w * h);
     for r in 0..h {
@@ -135,6 +169,7 @@ pub fn read(cloud: &PointCloud2) -> Result<Vec<CloudPoint>, CloudError> {
                 xyz: [f(b, ox.unwrap_or(0)), f(b, oy.unwrap_or(0)), f(b, oz.unwrap_or(0))],
                 intensity: oi.map(|o| f(b, o)),
                 rgb: oc.map(|o| f(b, o).to_bits()),
+                laser: ol.map(|o| f(b, o)),
             });
         }
     }
@@ -160,6 +195,11 @@ mod tests {
         assert_eq!(p[4].xyz, [1.0, 1.0, 0.5]);
         assert_eq!(p[4].rgb, Some(0x00ff8000));
         assert!(p[5].xyz[0].is_nan());
+        assert_eq!(p[4].laser, None);
+        let c = build_with_laser(Header::default(), 2, 1, |r, _| ([r as f32; 3], 1.0, 7, r as f32));
+        assert_eq!((c.point_step, c.fields.len()), (24, 6));
+        let p = read(&c).unwrap();
+        assert_eq!((p[1].xyz, p[1].rgb, p[1].laser), ([1.0; 3], Some(7), Some(1.0)));
     }
 
     #[test]

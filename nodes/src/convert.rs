@@ -119,19 +119,28 @@ pub fn transform_stamped(stamp_ns: i64, parent: &str, child: &str, t: &Iso3) -> 
 
 /// The message form of a detected line.
 pub fn line_msg(line: &CoreLine, header: Header) -> LaserLine {
+    lines_msg(std::slice::from_ref(line), &[], header)
+}
+
+/// The message form of several lasers' lines in one image: one block of samples per laser, in
+/// the order of `lasers` (empty: one line, the single laser).
+pub fn lines_msg(lines: &[CoreLine], lasers: &[String], header: Header) -> LaserLine {
+    let first = lines.first();
+    let cat = |f: fn(&CoreLine) -> &Vec<f32>| lines.iter().flat_map(|l| f(l).iter().copied()).collect::<Vec<f32>>();
     LaserLine {
         header,
-        image_width: line.image_width,
-        image_height: line.image_height,
-        orientation: match line.orientation {
+        image_width: first.map_or(0, |l| l.image_width),
+        image_height: first.map_or(0, |l| l.image_height),
+        orientation: match first.map_or(Orientation::Vertical, |l| l.orientation) {
             Orientation::Vertical => LaserLine::ORIENTATION_VERTICAL,
             Orientation::Horizontal => LaserLine::ORIENTATION_HORIZONTAL,
         },
-        u: line.u.clone(),
-        v: line.v.clone(),
-        strength: line.strength.clone(),
-        width: line.width.clone(),
-        rgb: line.rgb.clone(),
+        u: cat(|l| &l.u),
+        v: cat(|l| &l.v),
+        strength: cat(|l| &l.strength),
+        width: cat(|l| &l.width),
+        rgb: lines.iter().flat_map(|l| l.rgb.iter().copied()).collect(),
+        lasers: lasers.to_vec(),
     }
 }
 
@@ -154,13 +163,22 @@ pub enum LineShapeError {
         /// Length of `rgb`.
         rgb: usize,
     },
+    /// The lasers named are not the ones this node was given.
+    #[error("LaserLine is of lasers {got:?}; this node's lasers (parameter lasers) are {expected:?}")]
+    Lasers {
+        /// The message's `lasers`.
+        got: Vec<String>,
+        /// The node's.
+        expected: Vec<String>,
+    },
     /// The orientation is neither vertical (0) nor horizontal (1).
     #[error("LaserLine orientation {0} is neither 0 (vertical) nor 1 (horizontal)")]
     Orientation(u8),
     /// The image size is outside the limits every tool applies.
     #[error("LaserLine image size {0}x{1} is outside {2} pixels a side")]
     ImageSize(u32, u32, String),
-    /// The sample count is not one per row (vertical) or column (horizontal) of its image.
+    /// The sample count is not one per row (vertical) or column (horizontal) of its image, for
+    /// each laser.
     #[error("LaserLine has {samples} samples; a {orientation} line of a {width}x{height} image has {expected}")]
     Samples {
         /// Samples in the message.
@@ -180,6 +198,16 @@ pub enum LineShapeError {
 /// arrays of one length, a known orientation, an image within the limits, and one sample per
 /// row (vertical) or column (horizontal).
 pub fn core_line(m: &LaserLine) -> Result<CoreLine, LineShapeError> {
+    let mut lines = core_lines(m)?;
+    if lines.len() != 1 {
+        return Err(LineShapeError::Lasers { got: m.lasers.clone(), expected: Vec::new() });
+    }
+    Ok(lines.remove(0))
+}
+
+/// The algorithm form of a line message of one or several lasers: one line per block of
+/// samples (`lasers`, or one block without), each checked as [`core_line`] checks one.
+pub fn core_lines(m: &LaserLine) -> Result<Vec<CoreLine>, LineShapeError> {
     let n = m.u.len();
     if m.v.len() != n || m.strength.len() != n || m.width.len() != n || !(m.rgb.is_empty() || m.rgb.len() == 3 * n) {
         return Err(LineShapeError::Arrays {
@@ -198,31 +226,45 @@ pub fn core_line(m: &LaserLine) -> Result<CoreLine, LineShapeError> {
     if !xsurf_core::limits::image_side_ok(m.image_width) || !xsurf_core::limits::image_side_ok(m.image_height) {
         return Err(LineShapeError::ImageSize(m.image_width, m.image_height, xsurf_core::limits::image_side_text()));
     }
-    if n != expected as usize {
+    let blocks = m.lasers.len().max(1);
+    if m.lasers.len() > xsurf_core::rig::MAX_LASERS || n != expected as usize * blocks {
         return Err(LineShapeError::Samples {
             samples: n,
-            expected,
+            expected: expected * blocks as u32,
             orientation: name,
             width: m.image_width,
             height: m.image_height,
         });
     }
-    Ok(CoreLine {
-        orientation,
-        image_width: m.image_width,
-        image_height: m.image_height,
-        u: m.u.clone(),
-        v: m.v.clone(),
-        strength: m.strength.clone(),
-        width: m.width.clone(),
-        rgb: m.rgb.clone(),
-    })
+    let k = expected as usize;
+    let rgb = !m.rgb.is_empty();
+    Ok((0..blocks)
+        .map(|b| CoreLine {
+            orientation,
+            image_width: m.image_width,
+            image_height: m.image_height,
+            u: m.u[b * k..(b + 1) * k].to_vec(),
+            v: m.v[b * k..(b + 1) * k].to_vec(),
+            strength: m.strength[b * k..(b + 1) * k].to_vec(),
+            width: m.width[b * k..(b + 1) * k].to_vec(),
+            rgb: if rgb { m.rgb[3 * b * k..3 * (b + 1) * k].to_vec() } else { Vec::new() },
+        })
+        .collect())
 }
 
 /// A one-frame profile as an organized cloud (height = samples, width 1).
 pub fn profile_cloud(p: &Profile, header: Header) -> PointCloud2 {
     pointcloud::build(header, p.points.len() as u32, 1, |r, _| {
         (p.points[r], p.intensity[r], p.rgb.as_ref().map_or(0, |c| c[r]))
+    })
+}
+
+/// A one-frame profile of several lasers (a block of `per_laser` samples each, `Some`) with
+/// the field `laser` (the block's index); `None`: [`profile_cloud`], without the field.
+pub fn profile_cloud_lasers(p: &Profile, header: Header, per_laser: Option<usize>) -> PointCloud2 {
+    let Some(n) = per_laser.filter(|&n| n > 0) else { return profile_cloud(p, header) };
+    pointcloud::build_with_laser(header, p.points.len() as u32, 1, |r, _| {
+        (p.points[r], p.intensity[r], p.rgb.as_ref().map_or(0, |c| c[r]), (r / n) as f32)
     })
 }
 
@@ -285,6 +327,20 @@ pub fn grid_cloud(g: &Grid, header: Header) -> PointCloud2 {
     pointcloud::build(header, ns as u32, g.frames() as u32, |r, c| {
         let i = c * ns + r;
         (g.points()[i], g.intensity()[i], g.rgb()[i])
+    })
+}
+
+/// The organized grid of a scanner with `lasers` lasers (a block of samples each) with the
+/// field `laser`; 0 (`lasers` unset): [`grid_cloud`], without the field.
+pub fn grid_cloud_lasers(g: &Grid, header: Header, lasers: usize) -> PointCloud2 {
+    if lasers == 0 {
+        return grid_cloud(g, header);
+    }
+    let ns = g.samples();
+    let per = (ns / lasers).max(1);
+    pointcloud::build_with_laser(header, ns as u32, g.frames() as u32, |r, c| {
+        let i = c * ns + r;
+        (g.points()[i], g.intensity()[i], g.rgb()[i], (r / per) as f32)
     })
 }
 

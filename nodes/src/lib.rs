@@ -11,6 +11,7 @@
 pub mod cli;
 pub mod convert;
 pub mod host;
+pub mod lasers;
 pub mod launch;
 pub mod offline;
 pub mod pacs;

@@ -329,6 +329,13 @@ pub fn write_xray(path: &Path, scanner: &Scanner, start_ns: i64, end_ns: i64) ->
 /// `params.yaml` (the laser plane for `reconstruct`).
 pub fn write_truth(dir: &Path, scanner: &Scanner) -> anyhow::Result<Vec<usize>> {
     let mut counts = Vec::new();
+    let per_laser: Vec<Vec<usize>> = (0..scanner.rig.cameras.len())
+        .map(|ci| {
+            (0..scanner.lasers())
+                .map(|l| (0..scanner.frame_count()).map(|f| scanner.observable_points_of(ci, l, f, 10.0).len()).sum())
+                .collect()
+        })
+        .collect();
     for (ci, c) in scanner.rig.cameras.iter().enumerate() {
         let pts: Vec<[f32; 3]> = (0..scanner.frame_count())
             .flat_map(|f| scanner.observable_points(ci, f, 10.0))
@@ -349,15 +356,20 @@ pub fn write_truth(dir: &Path, scanner: &Scanner) -> anyhow::Result<Vec<usize>> 
         "travel_m": scanner.travel_range(),
         "laser_sheet_sigma_m": scanner.laser.sheet_sigma_m,
         "truth_points": counts,
+        "lasers": scanner.rig.effective_lasers().iter().map(|l| l.name.clone()).collect::<Vec<_>>(),
+        "truth_points_per_laser": per_laser,
         "truth_ply": "truth_<cam>.ply: points on the laser sheet each camera can observe (table frame, metres)",
     });
     xsurf_formats::write_bytes_atomic(&dir.join("truth.json"), serde_json::to_string_pretty(&truth)?.as_bytes())?;
     xsurf_formats::rig::write(&dir.join("rig.yaml"), &scanner.rig, "the rig this synthetic scan was rendered with")?;
     let p = scanner.rig.laser_plane;
-    let params = format!(
+    let mut params = format!(
         "# Parameters for reconstructing this synthetic scan (ROS 2 params-file format).\n/**:\n  ros__parameters:\n    laser_plane: [{}, {}, {}, {}]\n",
         p[0], p[1], p[2], p[3]
     );
+    if !scanner.rig.lasers.is_empty() {
+        params.push_str(&crate::lasers::params_yaml(&scanner.rig.lasers));
+    }
     xsurf_formats::write_bytes_atomic(&dir.join("params.yaml"), params.as_bytes())?;
     Ok(counts)
 }

@@ -35,6 +35,8 @@ pub struct Merged {
     pub fused_dropped: usize,
     /// Triangles added by the zipper and the hole filling.
     pub seam_triangles: usize,
+    /// For each vertex of `surface`, the grid it came from (an index into the grids merged).
+    pub vertex_grid: Vec<u8>,
 }
 
 /// Merges the cameras' grids (`names[k]` is grid `k`'s camera), which are fused in place.
@@ -66,5 +68,8 @@ pub fn merge_grids(names: &[String], grids: &mut [Grid], cfg: &MergeConfig) -> M
             meshes.push(("seams".into(), seams));
         }
     }
-    Merged { surface, meshes, fused_dropped: fused.dropped.iter().sum(), seam_triangles }
+    // The seams join existing vertices; any they add are counted as the last grid's.
+    let last = camera.last().copied().unwrap_or(0);
+    camera.resize(surface.positions.len(), last);
+    Merged { surface, meshes, fused_dropped: fused.dropped.iter().sum(), seam_triangles, vertex_grid: camera }
 }

@@ -43,3 +43,46 @@ pub fn camera_grids(scanner: &Scanner, used: &Rig) -> Vec<Grid> {
         })
         .collect()
 }
+
+/// Each camera's grids of the scanner's scan, one per laser of `used` (its effective lasers:
+/// each found in its own colour against the others, intersected with its own plane), as the
+/// live graph makes them: `grids[camera][laser]`.
+pub fn laser_grids(scanner: &Scanner, used: &Rig) -> Vec<Vec<Grid>> {
+    use xsurf_core::edge::{Channel, LaserDetectors};
+    let poses = pose_track(scanner);
+    let lasers = used.effective_lasers();
+    let several = used.lasers.len() > 1;
+    used.cameras
+        .iter()
+        .enumerate()
+        .map(|(ci, cam)| {
+            let tri: Vec<Triangulator> = lasers
+                .iter()
+                .map(|l| {
+                    let cfg = TriangulatorConfig { laser_plane: l.plane, ..Default::default() };
+                    Triangulator::new(cam.geometry().unwrap(), &cfg).unwrap()
+                })
+                .collect();
+            let configs = lasers
+                .iter()
+                .map(|l| {
+                    let channel =
+                        if several { Channel::against_others(l.channel) } else { EdgeConfig::default().channel };
+                    EdgeConfig { channel, ..EdgeConfig::default() }
+                })
+                .collect();
+            let mut det = LaserDetectors::new(configs).unwrap();
+            let mut grids = vec![Grid::new(cam.height as usize); lasers.len()];
+            let (mut lines, mut prof) = (Vec::new(), Profile::default());
+            for f in 0..scanner.frame_count() {
+                let ft = scanner.frame_time(f);
+                det.detect(&scanner.render(ci, f).view().unwrap(), &mut lines).unwrap();
+                for (k, line) in lines.iter().enumerate() {
+                    tri[k].triangulate(line, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
+                    grids[k].push(ft.stamp_ns, &prof).unwrap();
+                }
+            }
+            grids
+        })
+        .collect()
+}

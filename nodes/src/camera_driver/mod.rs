@@ -104,8 +104,8 @@ fn source_spec(p: &CameraDriverParams) -> Result<SourceSpec, ParamError> {
     })
 }
 
-fn config(p: &Params) -> Result<Config, ParamError> {
-    let p = CameraDriverParams::from_params(p)?;
+fn config(raw: &Params) -> Result<Config, ParamError> {
+    let p = CameraDriverParams::from_params(raw)?;
     let source = source_spec(&p)?;
     let url = p.camera_info_url;
     let camera_info = if url.is_empty() {
@@ -145,10 +145,26 @@ fn config(p: &Params) -> Result<Config, ParamError> {
             Some((codec, p.jpeg_quality.clamp(1, 100) as u8))
         }
     };
-    let rig = match &p.rig_file {
+    let mut rig = match &p.rig_file {
         None => None,
         Some(f) => Some(xsurf_formats::rig::read(f).map_err(|e| Params::invalid("rig_file", e.to_string()))?),
     };
+    if let Some(lasers) = crate::lasers::from_params(raw, &p.lasers, [0.0, 0.0, 1.2])? {
+        // A grey camera sees every laser alike: only colour tells their lines apart.
+        if let (false, SourceSpec::Synthetic, Some(second)) = (encoding.is_color(), &source, lasers.get(1)) {
+            return Err(Params::invalid(
+                &format!("laser.{}.channel", second.name),
+                format!(
+                    "{} on a {} camera: a grey image cannot tell {} lasers apart (encoding rgb8 or bgr8)",
+                    second.channel.name(),
+                    p.encoding,
+                    lasers.len()
+                ),
+            ));
+        }
+        let study = xsurf_core::rig::Rig::study(dim("width", p.width)?, dim("height", p.height)?);
+        rig.get_or_insert(study).lasers = lasers;
+    }
     Ok(Config {
         source,
         camera_info,

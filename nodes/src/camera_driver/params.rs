@@ -52,6 +52,9 @@ xsurf_runtime::parameters! {
         fps: f64 = 30.0, unit "Hz";
         /// mono8, rgb8 or bgr8
         encoding: String = "mono8".into();
+        /// synthetic source: the scanner's lasers by name (empty: the rig's), rendered each in
+        /// its colour (laser.<name>.plane, .source, .channel); several need a colour encoding
+        lasers: Vec<String> = Vec::new();
         /// raw: publish image_raw (sensor_msgs/Image); compressed: publish image_raw/compressed
         /// (sensor_msgs/CompressedImage) instead, as image_transport's compressed plugin writes it
         image_transport: Transport = Transport::Raw, via Choice;

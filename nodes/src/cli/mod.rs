@@ -32,7 +32,7 @@ pub mod calibrate;
 const USAGE: &str = "usage:
   xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S] [--preset ideal|hard] [--encoding E]
       synthesize a scan, reconstruct it, write the files and report the accuracy (default out: ./xsurf-demo)
-  xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--preset ideal|hard] [--zstd] [--frames N]
+  xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--preset ideal|hard] [--zstd] [--frames N] [--lasers 1|3]
              [--compressed jpeg|png [--jpeg-quality Q]]
       write a synthetic scan as a rosbag2 bag plus its ground truth and radiograph (scenes: pyramid, phantom,
       sphere, cylinder, box, body); with --compressed the cameras are sensor_msgs/CompressedImage on
@@ -90,6 +90,7 @@ const DETAILS: &[(&str, &str)] = &[
   --speed M_S        the C-arm's speed, m/s (default 0.07; above 0, below 2)
   --preset P         ideal (default) or hard: noise, blur, uneven light and dark surfaces
   --encoding E       mono8 (default), rgb8 or bgr8
+  --lasers N         1 (default) or 3: the collimator's plane and two tilted planes (rgb8 or bgr8)
 example: xsurf demo --out /tmp/demo --scene phantom"),
     ("synth", "options:
   SCENE              pyramid, phantom, sphere, cylinder, box or body
@@ -100,6 +101,8 @@ example: xsurf demo --out /tmp/demo --scene phantom"),
   --preset P         ideal (default) or hard                   --zstd    compress the bag's chunks
   --compressed F     jpeg or png: sensor_msgs/CompressedImage; --jpeg-quality Q, 1 to 100 (default 90)
   --frames N         N frames per camera as image files instead of a bag
+  --lasers N         1 (default: the collimator's plane) or 3 (and green and blue planes tilted 25
+                     degrees, cameras at 45 degrees: Rig::three_lasers; needs rgb8 or bgr8)
 example: xsurf synth phantom -o /tmp/phantom-bag --preset hard --zstd"),
     ("reconstruct", "options:
   BAG                a rosbag2 folder (MCAP): images or compressed images, camera_info, /tf, /tf_static
@@ -266,7 +269,16 @@ fn scanner(a: &Args, scene: &str) -> anyhow::Result<Scanner> {
     };
     preset.apply(&mut settings);
     let rig = match a.get("--rig") {
-        None => Rig::study(w, h),
+        None if a.get("--lasers") == Some("3") => {
+            if !encoding.is_color() {
+                return Err(usage("--lasers 3: a grey camera cannot tell the lasers apart (--encoding rgb8 or bgr8)"));
+            }
+            Rig::three_lasers(w, h)
+        }
+        None => match a.get("--lasers") {
+            None | Some("1") => Rig::study(w, h),
+            Some(n) => return Err(usage(format!("--lasers {n}: 1 (the collimator) or 3 (and two tilted planes)"))),
+        },
         Some(f) => {
             let rig = xsurf_formats::rig::read(Path::new(f)).with_context(|| format!("--rig {f}"))?;
             if a.get("--size").is_some() {
@@ -308,6 +320,7 @@ fn cmd_synth(args: &[String]) -> anyhow::Result<()> {
                 "--preset",
                 "--compressed",
                 "--jpeg-quality",
+                "--lasers",
             ],
             group: None,
         },
@@ -557,7 +570,7 @@ fn cmd_demo(args: &[String]) -> anyhow::Result<()> {
         args,
         &Syntax {
             flags: &[],
-            valued: &["--out", "-o", "--scene", "--size", "--speed", "--preset", "--encoding"],
+            valued: &["--out", "-o", "--scene", "--size", "--speed", "--preset", "--encoding", "--lasers"],
             group: None,
         },
     )?;

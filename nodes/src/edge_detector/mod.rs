@@ -9,7 +9,7 @@ pub const NODE: crate::registry::NodeType =
 
 use crate::convert;
 use std::sync::Arc;
-use xsurf_core::edge::{EdgeDetector, LaserLine};
+use xsurf_core::edge::{Channel, LaserDetectors, LaserLine};
 use xsurf_core::limits;
 use xsurf_msgs::sensor_msgs::CameraInfo;
 use xsurf_msgs::std_msgs::StringMsg;
@@ -22,8 +22,11 @@ use xsurf_runtime::params::{NodeParams, ParamError, Params};
 /// The edge detector component.
 pub struct EdgeDetectorNode {
     transport: Transport,
-    detector: EdgeDetector,
-    line: LaserLine,
+    /// One detector per laser (one without `lasers`).
+    detector: LaserDetectors,
+    /// The lasers' names, as each line message carries them (empty without `lasers`).
+    lasers: Vec<String>,
+    lines: Vec<LaserLine>,
     frames: u64,
     samples_found: u64,
     frames_with_line: u64,
@@ -65,12 +68,12 @@ impl EdgeDetectorNode {
     }
     /// Builds the node from its parameters.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
-        let p = EdgeParams::from_params(p)?;
-        let detector = EdgeDetector::new(p.config()?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
+        let (typed, detector, lasers) = Self::detectors(p)?;
         Ok(Self {
-            transport: p.image_transport,
+            transport: typed.image_transport,
             detector,
-            line: LaserLine::default(),
+            lasers,
+            lines: Vec::new(),
             frames: 0,
             samples_found: 0,
             frames_with_line: 0,
@@ -79,6 +82,23 @@ impl EdgeDetectorNode {
             camera: String::new(),
             tally: Default::default(),
         })
+    }
+
+    /// The parameters, a detector per laser (each in its own colour against the others) and
+    /// the lasers' names.
+    fn detectors(p: &Params) -> Result<(EdgeParams, LaserDetectors, Vec<String>), ParamError> {
+        let typed = EdgeParams::from_params(p)?;
+        let config = typed.config()?;
+        let lasers = crate::lasers::from_params(p, &typed.lasers, [0.0; 3])?;
+        let configs = match &lasers {
+            None => vec![config],
+            Some(l) => {
+                l.iter().map(|l| xsurf_core::edge::EdgeConfig { channel: Channel::against_others(l.channel), ..config.clone() }).collect()
+            }
+        };
+        let detector = LaserDetectors::new(configs).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
+        let names = lasers.map(|l| l.into_iter().map(|l| l.name).collect()).unwrap_or_default();
+        Ok((typed, detector, names))
     }
 
     /// Finds the line in one image.
@@ -115,11 +135,19 @@ impl EdgeDetectorNode {
                 view.height()
             )));
         }
-        let stats = self.detector.detect(&view, &mut self.line).map_err(NodeError::malformed)?;
+        let stats = self.detector.detect(&view, &mut self.lines).map_err(|e| match e {
+            xsurf_core::edge::EdgeError::GreyWithLasers { .. } => {
+                self.bad_images += 1;
+                NodeError::contradicts(format!("image at {}: {e}; parameter lasers names {:?}", at(header), self.lasers))
+            }
+            e => NodeError::malformed(e),
+        })?;
+        let found: u32 = stats.iter().map(|s| s.found).sum();
         self.frames += 1;
-        self.samples_found += u64::from(stats.found);
-        self.frames_with_line += u64::from(stats.found > 0);
-        out.publish(Output::Line, Msg::LaserLine(Arc::new(convert::line_msg(&self.line, header.clone()))));
+        self.samples_found += u64::from(found);
+        self.frames_with_line += u64::from(found > 0);
+        let line = convert::lines_msg(&self.lines, &self.lasers, header.clone());
+        out.publish(Output::Line, Msg::LaserLine(Arc::new(line)));
         Ok(())
     }
 }
@@ -153,11 +181,12 @@ impl Component for EdgeDetectorNode {
         ]
     }
     fn reconfigure(&mut self, p: &Params) -> Result<(), ParamError> {
-        let p = EdgeParams::from_params(p)?;
-        if p.image_transport != self.transport {
+        let (typed, detector, lasers) = Self::detectors(p)?;
+        if typed.image_transport != self.transport {
             return Err(Params::invalid("image_transport", "fixed at start (it chooses the subscription)"));
         }
-        self.detector = EdgeDetector::new(p.config()?).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
+        self.detector = detector;
+        self.lasers = lasers;
         Ok(())
     }
     fn handle(&mut self, input: Input, msg: &Msg, out: &mut Out) -> Result<(), NodeError> {

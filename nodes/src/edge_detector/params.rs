@@ -16,8 +16,15 @@ xsurf_runtime::parameters! {
         method: Method = D.method, via Choice;
         /// vertical: one sample per image row; horizontal: one per column
         line_orientation: Orientation = D.line_orientation, via Choice;
-        /// signal of colour images: red_minus_others (the laser's colour against the others), red, luma
+        /// signal of colour images: red_minus_others (the laser's colour against the others),
+        /// green_minus_others, blue_minus_others, red, green, blue, luma; with `lasers`, each
+        /// laser's line is found in its own colour against the others instead
         channel: Channel = D.channel, via Choice;
+        /// the scanner's lasers by name (empty: the single laser_plane); each needs
+        /// laser.<name>.plane (double[4] nx ny nz d in carm, unit normal) and
+        /// laser.<name>.channel (red, green or blue, each laser its own), and may give
+        /// laser.<name>.source (double[3] in carm). Several lasers need a colour camera.
+        lasers: Vec<String> = Vec::new();
         /// first column searched
         roi_x_offset ["roi.x_offset"]: u32 = D.roi.x_offset, unit "px";
         /// first row searched

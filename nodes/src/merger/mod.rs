@@ -54,6 +54,9 @@ use xsurf_runtime::params::{NodeParams, ParamError, Params};
 
 struct Config {
     cameras: Vec<String>,
+    /// The lasers (empty: one laser, no `laser` field); the first is the one the refinement
+    /// fits, the others' grids follow their camera.
+    lasers: Vec<xsurf_core::rig::RigLaser>,
     refine: Option<(RefineConfig, Plane)>,
     save_rig_file: Option<PathBuf>,
     delay_ns: i64,
@@ -69,15 +72,19 @@ struct Config {
     pacs: Option<dicom::PacsConfig>,
 }
 
-fn config(p: &Params) -> Result<Config, ParamError> {
-    let p = MergerParams::from_params(p)?;
+fn config(raw: &Params) -> Result<Config, ParamError> {
+    let p = MergerParams::from_params(raw)?;
+    let lasers = crate::lasers::from_params(raw, &p.lasers, [0.0; 3])?.unwrap_or_default();
     let cameras = p.cameras.clone();
     if cameras.is_empty() || cameras.iter().any(|c| c.is_empty() || c.contains(char::is_whitespace)) {
         return Err(Params::invalid("cameras", format!("{cameras:?}: needs one or more camera names")));
     }
     let mesh = MeshConfig { max_edge_m: p.max_edge_m, min_angle_deg: p.min_angle_deg, ..MeshConfig::default() };
     mesh.validate().map_err(|e| Params::invalid("merger", e))?;
-    let plane = crate::triangulator::laser_plane("laser_plane", &p.laser_plane)?;
+    let plane = match lasers.first() {
+        Some(l) => l.plane,
+        None => crate::triangulator::laser_plane("laser_plane", &p.laser_plane)?,
+    };
     let plane = Plane::from_params(plane)
         .ok_or_else(|| Params::invalid("laser_plane", format!("{plane:?}: needs [nx, ny, nz, d] with |n| = 1")))?;
     let positive = |name: &str, v: f64| -> Result<f64, ParamError> {
@@ -95,6 +102,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     };
     let (dicom, pacs) = dicom::config(&p)?;
     Ok(Config {
+        lasers,
         dicom,
         pacs,
         refine: p.refine.then_some((refine_cfg, plane)),
@@ -264,9 +272,10 @@ impl MergerNode {
         let at = convert::fmt_stamp(c.header.stamp.nanos());
         let grid = convert::cloud_grid(c).map_err(|e| NodeError::malformed(format!("cloud at {at}: {e}")))?;
         if let Some(&(w, h)) = self.camera_sizes.get(&i) {
-            if c.height != w && c.height != h {
+            let l = self.cfg.lasers.len().max(1) as u32;
+            if c.height != w * l && c.height != h * l {
                 return Err(NodeError::contradicts(format!(
-                    "cloud at {at} has {} samples per frame; the camera's {w}x{h} images (camera_info) give {h} (vertical lines) or {w} (horizontal)",
+                    "cloud at {at} has {} samples per frame; the camera's {w}x{h} images (camera_info) give {h} (vertical lines) or {w} (horizontal), times {l} laser(s)",
                     c.height
                 )));
             }
@@ -327,10 +336,14 @@ impl MergerNode {
             return;
         }
         let stamp = self.clouds.values().map(|(t, _)| *t).max().unwrap_or(0);
-        let grids: Vec<(String, Grid)> =
-            self.clouds.iter().map(|(&i, (_, g))| (self.cfg.cameras[i].clone(), g.clone())).collect();
-        let (names, mut gs): (Vec<String>, Vec<Grid>) = grids.into_iter().unzip();
-        let (refined, refinement) = self.refine(&names, &mut gs);
+        let lasers = self.cfg.lasers.clone();
+        // Per camera, one grid per laser (its blocks of samples).
+        let (cams, mut blocks): (Vec<String>, Vec<Vec<Grid>>) = self
+            .clouds
+            .iter()
+            .map(|(&i, (_, g))| (self.cfg.cameras[i].clone(), g.blocks(lasers.len())))
+            .unzip();
+        let (refined, refinement) = self.refine(&cams, &mut blocks);
         if !refined.is_empty() {
             let placements = TFMessage {
                 transforms: refined
@@ -341,16 +354,34 @@ impl MergerNode {
             out.publish(Output::Placements, Msg::Tf(Arc::new(placements)));
             self.save_rig(&refined);
         }
-        let Merged { surface: merged, meshes, fused_dropped, seam_triangles } =
+        // Every camera's and laser's grid (`cam1.left`) into one layer.
+        let mut names = Vec::new();
+        let mut gs = Vec::new();
+        for (cam, grids) in cams.iter().zip(blocks) {
+            for (k, g) in grids.into_iter().enumerate() {
+                names.push(lasers.get(k).map_or_else(|| cam.clone(), |l| format!("{cam}.{}", l.name)));
+                gs.push(g);
+            }
+        }
+        let Merged { surface: merged, meshes, fused_dropped, seam_triangles, vertex_grid } =
             merge_grids(&names, &mut gs, &self.cfg.merge);
         self.fused_dropped += fused_dropped as u64;
         self.seam_triangles += seam_triangles as u64;
         let header = convert::header(stamp, &self.cfg.frame_id);
         let pts = &merged.positions;
-        let cloud = pointcloud::build(header.clone(), 1, pts.len() as u32, |_, c| {
+        let point = |c: usize| {
             let col = merged.colors.get(c).copied().unwrap_or([200; 3]);
             (pts[c], 0.0, (u32::from(col[0]) << 16) | (u32::from(col[1]) << 8) | u32::from(col[2]))
-        });
+        };
+        let cloud = if lasers.is_empty() {
+            pointcloud::build(header.clone(), 1, pts.len() as u32, |_, c| point(c))
+        } else {
+            // Each vertex's laser: its grid's, grids being camera-major, laser-minor.
+            pointcloud::build_with_laser(header.clone(), 1, pts.len() as u32, |_, c| {
+                let (p, i, rgb) = point(c);
+                (p, i, rgb, vertex_grid.get(c).map_or(0.0, |&g| f32::from(g) % lasers.len() as f32))
+            })
+        };
         self.merges += 1;
         self.points += pts.len() as u64;
         self.triangles += merged.triangles.len() as u64;
@@ -368,7 +399,7 @@ impl MergerNode {
         let start_ns = self.scan_start_ns.unwrap_or(stamp);
         let end_ns = self.scan_end_ns.filter(|&e| e >= start_ns).unwrap_or(stamp);
         let span = dicom::ScanSpan { scan_id: self.scan_id, start_ns, end_ns };
-        self.unwritten = Some(Unwritten { span, names, refinement });
+        self.unwritten = Some(Unwritten { span, names: cams, refinement });
         log::info!(
             "merger: scan {}: {} points, {} triangles from {} camera(s)",
             self.scan_id,
@@ -383,9 +414,12 @@ impl MergerNode {
     /// Refines each further camera's placement against the first camera's grid
     /// (`core::merge::refine`); returns the placements refined and, per camera, what happened
     /// (for `refinement.json`). Each decision is logged and counted.
-    fn refine(&mut self, names: &[String], grids: &mut [Grid]) -> (Vec<(String, Iso3)>, Vec<Record>) {
+    /// With several lasers (`blocks[camera][laser]`) the first laser's grids are fitted, and a
+    /// refined camera's further grids are re-triangulated through the refined placement, each
+    /// with its own laser's plane.
+    fn refine(&mut self, names: &[String], blocks: &mut [Vec<Grid>]) -> (Vec<(String, Iso3)>, Vec<Record>) {
         let Some((cfg, plane)) = self.cfg.refine else { return (Vec::new(), Vec::new()) };
-        if grids.len() < 2 {
+        if blocks.len() < 2 {
             return (Vec::new(), Vec::new());
         }
         let statics = &self.statics;
@@ -393,7 +427,28 @@ impl MergerNode {
             let frame = format!("{name}_optical_frame");
             statics.carm_from(&frame).ok_or_else(|| format!("no carm -> {frame} on /tf_static"))
         };
-        let outcomes = refine_cameras(names, grids, placement, self.motion.as_ref(), &plane, &cfg);
+        let mut firsts: Vec<Grid> = blocks.iter_mut().map(|b| std::mem::take(&mut b[0])).collect();
+        let outcomes = refine_cameras(names, &mut firsts, placement, self.motion.as_ref(), &plane, &cfg);
+        for (b, g) in blocks.iter_mut().zip(firsts) {
+            b[0] = g;
+        }
+        for o in &outcomes {
+            let (Some(report), Some(k), Some(motion)) =
+                (&o.report, names.iter().position(|n| *n == o.record.camera), self.motion.as_ref())
+            else {
+                continue;
+            };
+            let Ok(from) = placement(&o.record.camera) else { continue };
+            let motion = xsurf_core::register::ScanMotion { table_from_carm: motion.first };
+            for (grid, laser) in blocks[k].iter_mut().zip(&self.cfg.lasers).skip(1) {
+                let moved = Plane::from_params(laser.plane).map(|p| {
+                    xsurf_core::register::retriangulate_grid(grid, &from, &report.carm_from_optical, &p, &motion, cfg.max_travel_spread_m)
+                });
+                if let Some(Err(e)) = moved {
+                    log::warn!("merger: {} laser {}: its grid stays where calibration put it: {e}", o.record.camera, laser.name);
+                }
+            }
+        }
         let scan = self.scan_id;
         let mut refined = Vec::new();
         let mut records = Vec::new();
@@ -937,7 +992,7 @@ mod tests {
             m.handle(Input::Tf, &Msg::Tf(Arc::new(tf)), &mut out).unwrap();
         }
         let names = vec!["cam1".to_string(), "cam2".to_string()];
-        let (refined, records) = m.refine(&names, &mut [Grid::new(1), Grid::new(1)]);
+        let (refined, records) = m.refine(&names, &mut [vec![Grid::new(1)], vec![Grid::new(1)]]);
         assert!(refined.is_empty());
         let why = records[0].reason.as_str();
         assert!(why.contains("turned 358.450 deg"), "{why}");

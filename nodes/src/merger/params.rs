@@ -32,6 +32,10 @@ xsurf_runtime::parameters! {
         /// refine each further camera's placement against the first camera's surface (false:
         /// calibration only)
         refine: bool = true;
+        /// the scanner's lasers by name (empty: one laser): each camera's cloud holds a block
+        /// of samples per laser; every camera's and laser's grid is fused into one layer, and
+        /// the merged cloud has a field `laser` (the index into this list)
+        lasers: Vec<String> = Vec::new();
         /// the laser plane in carm, [nx, ny, nz, d], as the triangulators have it (the
         /// refinement re-triangulates)
         laser_plane: Vec<f64> = vec![0.0, 1.0, 0.0, 0.0], unit "m";

@@ -23,7 +23,7 @@ use crate::scan_report::{FinalCloud, Gap, MesherReport};
 use std::path::PathBuf;
 use std::sync::Arc;
 use xsurf_core::edge::Orientation;
-use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
+use xsurf_core::mesh::{mesh_grid, Grid, Mesh, MeshConfig};
 use xsurf_core::triangulate::Profile;
 use xsurf_msgs::sensor_msgs::{CameraInfo, PointCloud2};
 use xsurf_msgs::std_msgs::StringMsg;
@@ -47,6 +47,9 @@ struct Config {
     gap_factor: f64,
     end_grace_ns: i64,
     orientation: Orientation,
+    /// The lasers, each a block of every profile's samples (0: `lasers` unset, one laser and
+    /// no `laser` field in the cloud).
+    lasers: usize,
 }
 
 fn config(p: &Params) -> Result<Config, ParamError> {
@@ -77,6 +80,7 @@ fn config(p: &Params) -> Result<Config, ParamError> {
         gap_factor: p.gap_factor,
         end_grace_ns: (p.end_grace_s * 1e9) as i64,
         orientation: p.line_orientation,
+        lasers: p.lasers.len(),
     })
 }
 
@@ -325,9 +329,14 @@ impl MesherNode {
         if frames < self.growing.from_frame + 2 {
             return;
         }
-        // Only the new frames (and the last one before them), every stride-th sample.
-        let sub = self.grid.part(self.growing.from_frame..frames, self.cfg.preview_stride);
-        let part = xsurf_core::mesh::mesh_grid_frames(&sub, &self.cfg.mesh, 0..sub.frames());
+        // Only the new frames (and the last one before them), every stride-th sample, each
+        // laser's grid apart.
+        let new = self.grid.part(self.growing.from_frame..frames, 1);
+        let mut part = Mesh::default();
+        for block in new.blocks(self.cfg.lasers) {
+            let sub = block.part(0..block.frames(), self.cfg.preview_stride);
+            part.append(&xsurf_core::mesh::mesh_grid_frames(&sub, &self.cfg.mesh, 0..sub.frames()));
+        }
         self.growing.from_frame = frames - 1;
         self.growing.last_ns = stamp;
         if part.triangles.is_empty() {
@@ -346,9 +355,10 @@ impl MesherNode {
             self.bad_profiles += 1;
             self.account.refused += 1;
             return Err(NodeError::contradicts(format!(
-                "profile has {} samples; the camera (camera_info, {} line) gives {n}",
+                "profile has {} samples; the camera (camera_info, {} line, {} laser(s)) gives {n}",
                 p.points.len(),
-                self.cfg.orientation.name()
+                self.cfg.orientation.name(),
+                self.cfg.lasers.max(1)
             )));
         }
         if self.grid.frames() == 0 {
@@ -395,21 +405,29 @@ impl MesherNode {
         if !self.active {
             return;
         }
-        let mut grid = self.grid.clone();
-        let cleaned = grid.clean(&self.cfg.mesh);
-        self.account.points_rejected = cleaned.rejected as u64;
-        self.points_rejected += cleaned.rejected as u64;
+        // One grid per laser, cleaned and meshed apart; the cloud stacks them again.
+        let mut blocks = self.grid.blocks(self.cfg.lasers);
+        let rejected: usize = blocks.iter_mut().map(|b| b.clean(&self.cfg.mesh).rejected).sum();
+        self.account.points_rejected = rejected as u64;
+        self.points_rejected += rejected as u64;
+        let grid = Grid::stacked(&blocks);
         let stamp = self.grid.stamps_ns().last().copied().unwrap_or(0);
         self.account.final_cloud = Some((stamp, grid.valid()));
         let report = self.account.report(self.scan_id, &self.camera, aborted, end_ns, self.gaps.nominal_ns());
         out.publish(Output::Report, Msg::Text(Arc::new(StringMsg { data: report })));
         self.active = false;
         self.scans += 1;
-        let mesh = mesh_grid(&grid, &self.cfg.mesh);
+        let mesh = match &blocks[..] {
+            [one] => mesh_grid(one, &self.cfg.mesh),
+            several => several.iter().fold(Mesh::default(), |mut m, b| {
+                m.append(&mesh_grid(b, &self.cfg.mesh));
+                m
+            }),
+        };
         self.triangles += mesh.triangles.len() as u64;
         self.mesh_points += mesh.positions.len() as u64;
         let header = convert::header(stamp, &self.cfg.frame_id);
-        out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud(&grid, header.clone()))));
+        out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_lasers(&grid, header.clone(), self.cfg.lasers))));
         if self.growing.parts > 0 {
             // The growing parts go; the scan's mesh takes their place.
             let clear = Marker { header: header.clone(), action: Marker::DELETEALL, ..Default::default() };
@@ -488,7 +506,7 @@ impl MesherNode {
             if stamp.saturating_sub(self.last_cloud_ns) >= period {
                 self.last_cloud_ns = stamp;
                 let h = convert::header(stamp, &self.cfg.frame_id);
-                out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud(&self.grid, h))));
+                out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_lasers(&self.grid, h, self.cfg.lasers))));
             }
         }
         if self.cfg.mesh_period_ns.is_some_and(|period| stamp.saturating_sub(self.growing.last_ns) >= period) {
@@ -542,7 +560,7 @@ impl MesherNode {
                 xsurf_core::limits::image_side_text()
             )));
         }
-        self.samples = Some(n as usize);
+        self.samples = Some(n as usize * self.cfg.lasers.max(1));
         Ok(())
     }
 }
@@ -666,7 +684,7 @@ mod tests {
         };
         let e = m.handle(Input::Profile, &profile(10, 1), &mut out).unwrap_err();
         assert!(
-            e.to_string().contains("profile has 10 samples; the camera (camera_info, vertical line) gives 40"),
+            e.to_string().contains("profile has 10 samples; the camera (camera_info, vertical line, 1 laser(s)) gives 40"),
             "{e}"
         );
         for sec in 2..6 {

@@ -41,6 +41,10 @@ xsurf_runtime::parameters! {
         /// after END the mesh marker is published again this often until the next scan, so
         /// viewers that join late or lose it (best effort) get it (0: once)
         mesh_republish_s: f64 = 2.0, unit "s", range 0.0..=3600.0;
+        /// the scanner's lasers by name (empty: one laser): each profile holds a block of samples
+        /// per laser, kept as one grid per laser and meshed apart; the cloud stacks them, with
+        /// a field `laser` (the index into this list)
+        lasers: Vec<String> = Vec::new();
         /// if set, each scan's mesh is written to <output_dir>/scan_<id>/<camera>.ply
         output_dir: Option<PathBuf> = None;
         /// camera name for files and markers (default: the node's namespace)

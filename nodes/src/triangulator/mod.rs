@@ -36,7 +36,10 @@ pub(crate) fn laser_plane(name: &str, v: &[f64]) -> Result<[f64; 4], ParamError>
 }
 
 struct Config {
-    tri: TriangulatorConfig,
+    /// One configuration per laser (its plane), in the order of `lasers`.
+    tri: Vec<TriangulatorConfig>,
+    /// The lasers' names (empty without `lasers`).
+    lasers: Vec<String>,
     table_frame: String,
     carm_frame: String,
     max_gap_ns: i64,
@@ -44,9 +47,10 @@ struct Config {
     max_extrapolation_ns: i64,
 }
 
-fn config(p: &Params) -> Result<Config, ParamError> {
-    let p = TriangulatorParams::from_params(p)?;
+fn config(raw: &Params) -> Result<Config, ParamError> {
+    let p = TriangulatorParams::from_params(raw)?;
     let plane = laser_plane("laser_plane", &p.laser_plane)?;
+    let lasers = crate::lasers::from_params(raw, &p.lasers, [0.0; 3])?;
     let angle = p.min_ray_plane_angle_deg;
     if !(0.0..90.0).contains(&angle) {
         return Err(Params::invalid("min_ray_plane_angle_deg", format!("{angle:?} is not in [0, 90)")));
@@ -58,14 +62,19 @@ fn config(p: &Params) -> Result<Config, ParamError> {
     if !(gap > 0.0 && gap < 3600.0) {
         return Err(Params::invalid("max_pose_gap_s", format!("{gap:?} is not in (0, 3600)")));
     }
+    let tri = |laser_plane| TriangulatorConfig {
+        laser_plane,
+        min_ray_plane_angle_deg: angle,
+        min_strength: p.min_strength,
+        min_z_m: p.min_z_m,
+        max_z_m: p.max_z_m,
+    };
     Ok(Config {
-        tri: TriangulatorConfig {
-            laser_plane: plane,
-            min_ray_plane_angle_deg: angle,
-            min_strength: p.min_strength,
-            min_z_m: p.min_z_m,
-            max_z_m: p.max_z_m,
+        tri: match &lasers {
+            None => vec![tri(plane)],
+            Some(l) => l.iter().map(|l| tri(l.plane)).collect(),
         },
+        lasers: lasers.map(|l| l.into_iter().map(|l| l.name).collect()).unwrap_or_default(),
         table_frame: p.table_frame,
         carm_frame: p.carm_frame,
         max_gap_ns: (gap * 1e9) as i64,
@@ -79,10 +88,13 @@ pub struct TriangulatorNode {
     cfg: Config,
     tf: TfBuffer,
     model: Option<(CameraModel, String)>,
-    tri: Option<(Triangulator, String, CameraModel)>,
-    /// Lines waiting for their pose, each already checked and converted.
-    pending: VecDeque<(Arc<LaserLine>, Arc<CoreLine>)>,
+    /// One triangulator per laser, for the camera frame and model they were built for.
+    tri: Option<(Vec<Triangulator>, String, CameraModel)>,
+    /// Lines waiting for their pose, each already checked and converted (a line per laser).
+    pending: VecDeque<(Arc<LaserLine>, Arc<Vec<CoreLine>>)>,
     profile: Profile,
+    /// One laser's profile, before it joins `profile`.
+    part: Profile,
     lines: u64,
     profiles: u64,
     points: u64,
@@ -141,6 +153,7 @@ impl TriangulatorNode {
             tri: None,
             pending: VecDeque::new(),
             profile: Profile::default(),
+            part: Profile::default(),
             lines: 0,
             profiles: 0,
             points: 0,
@@ -165,7 +178,12 @@ impl TriangulatorNode {
                     self.cfg.carm_frame
                 ))
             })?;
-            let t = Triangulator::new(CameraGeometry { model, carm_from_optical }, &self.cfg.tri)
+            let t = self
+                .cfg
+                .tri
+                .iter()
+                .map(|c| Triangulator::new(CameraGeometry { model, carm_from_optical }, c))
+                .collect::<Result<Vec<_>, _>>()
                 .map_err(NodeError::failed)?;
             self.tri = Some((t, frame.to_string(), model));
         }
@@ -213,14 +231,35 @@ impl TriangulatorNode {
                 }
             };
             let Some((tri, _, _)) = self.tri.as_ref() else { continue };
-            tri.triangulate(&core, &pose, &mut self.profile);
+            join_profiles(tri, &core, &pose, &mut self.part, &mut self.profile);
             self.profiles += 1;
             self.points += self.profile.valid() as u64;
             self.outside_volume += u64::from(self.profile.outside_volume);
-            let cloud: PointCloud2 =
-                convert::profile_cloud(&self.profile, convert::header(stamp, &self.cfg.table_frame));
+            let header = convert::header(stamp, &self.cfg.table_frame);
+            let per_laser = (!self.cfg.lasers.is_empty()).then(|| core.first().map_or(0, |l| l.len()));
+            let cloud: PointCloud2 = convert::profile_cloud_lasers(&self.profile, header, per_laser);
             out.publish(Output::Profile, Msg::Cloud(Arc::new(cloud)));
             self.tally.count(stamp);
+        }
+    }
+}
+
+/// Each laser's line intersected with its own plane, the profiles one after the other in
+/// `profile` (a block of samples per laser).
+fn join_profiles(tri: &[Triangulator], lines: &[CoreLine], pose: &xsurf_core::geom::Iso3, part: &mut Profile, profile: &mut Profile) {
+    if let ([t], [line]) = (tri, lines) {
+        t.triangulate(line, pose, profile);
+        return;
+    }
+    *profile = Profile { rgb: None, ..Profile::default() };
+    for (t, line) in tri.iter().zip(lines) {
+        t.triangulate(line, pose, part);
+        profile.points.extend_from_slice(&part.points);
+        profile.intensity.extend_from_slice(&part.intensity);
+        profile.range.extend_from_slice(&part.range);
+        profile.outside_volume += part.outside_volume;
+        if let Some(rgb) = &part.rgb {
+            profile.rgb.get_or_insert_with(Vec::new).extend_from_slice(rgb);
         }
     }
 }
@@ -259,11 +298,17 @@ impl Component for TriangulatorNode {
             (Input::Line, Msg::LaserLine(l)) => {
                 self.lines += 1;
                 // Checked on arrival, so that a malformed line is refused as itself.
-                let core = convert::core_line(l).map_err(|e| {
-                    let e = NodeError::malformed(e);
-                    self.tally.refuse(l.header.stamp.nanos(), "line", &e.to_string());
-                    e
-                })?;
+                let core = convert::core_lines(l).map_err(NodeError::malformed).and_then(|c| {
+                    if l.lasers == self.cfg.lasers {
+                        Ok(c)
+                    } else {
+                        Err(NodeError::contradicts(convert::LineShapeError::Lasers {
+                            got: l.lasers.clone(),
+                            expected: self.cfg.lasers.clone(),
+                        }))
+                    }
+                });
+                let core = core.inspect_err(|e| self.tally.refuse(l.header.stamp.nanos(), "line", &e.to_string()))?;
                 self.pending.push_back((l.clone(), Arc::new(core)));
                 self.drain(out, false);
                 Ok(())

@@ -5,6 +5,11 @@ xsurf_runtime::parameters! {
     pub struct TriangulatorParams {
         /// the laser plane in carm, [nx, ny, nz, d]: {p : n.p = d}
         laser_plane: Vec<f64> = vec![0.0, 1.0, 0.0, 0.0], unit "m";
+        /// the scanner's lasers by name (empty: the single laser_plane); each needs
+        /// laser.<name>.plane (double[4] nx ny nz d in carm, unit normal) and
+        /// laser.<name>.channel (red, green or blue); each line sample is intersected with its own
+        /// laser's plane, and the profile has a block of rows per laser and a field `laser`
+        lasers: Vec<String> = Vec::new();
         /// camera rays meeting the plane at a smaller angle are rejected
         min_ray_plane_angle_deg: f64 = 10.0, unit "deg";
         /// line samples weaker than this are dropped
