@@ -56,6 +56,32 @@ fn edge_detection(c: &mut Criterion) {
     }
 }
 
+/// Several lasers (issue 20): one frame of the three-laser scanner (red, green and blue planes)
+/// read by one laser's detector and by three (every channel extracted in one pass), beside
+/// byte_sum over the same bytes.
+fn several_lasers(c: &mut Criterion) {
+    use xsurf_core::edge::{Channel, LaserColor, LaserDetectors};
+    let (w, h) = (640u32, 480u32);
+    let mut g = c.benchmark_group(format!("lasers_{w}x{h}"));
+    g.throughput(Throughput::Elements(u64::from(w) * u64::from(h)));
+    let settings = ScanSettings { encoding: Encoding::Rgb8, ..Default::default() };
+    let s =
+        Scanner::new(Scene::by_name("box").unwrap(), Rig::three_lasers(w, h), LaserModel::default(), settings).unwrap();
+    let img = s.render(0, s.frame_count() / 2);
+    let view = img.view().unwrap();
+    g.bench_function("byte_sum", |b| b.iter(|| byte_sum(black_box(&img.data))));
+    let config = |c| EdgeConfig { channel: Channel::against_others(c), ..Default::default() };
+    for (name, colours) in [
+        ("rgb8/one_laser", vec![LaserColor::Red]),
+        ("rgb8/three_lasers", vec![LaserColor::Red, LaserColor::Green, LaserColor::Blue]),
+    ] {
+        let mut d = LaserDetectors::new(colours.into_iter().map(config).collect()).unwrap();
+        let mut out = Vec::new();
+        g.bench_function(name, |b| b.iter(|| d.detect(black_box(&view), &mut out).unwrap()));
+    }
+    g.finish();
+}
+
 fn triangulation(c: &mut Criterion) {
     let mut g = c.benchmark_group("triangulate_640x480");
     let s = scanner(640, 480, Encoding::Mono8);
@@ -209,5 +235,5 @@ use xsurf_core::holes::fill_holes;
 use xsurf_core::register::{refine_grid, RefineConfig, ScanMotion};
 use xsurf_core::zipper::zipper;
 
-criterion_group!(benches, edge_detection, triangulation, meshing, merging);
+criterion_group!(benches, edge_detection, several_lasers, triangulation, meshing, merging);
 criterion_main!(benches);

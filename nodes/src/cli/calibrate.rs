@@ -22,7 +22,7 @@ use xsurf_core::calib::intrinsics::{self, DistortionModel, IntrinsicsConfig};
 use xsurf_core::calib::laser::{self, LaserView};
 use xsurf_core::calib::placement::{self, table_from_board, PlacementView};
 use xsurf_core::camera::CameraModel;
-use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine};
+use xsurf_core::edge::{Channel, EdgeConfig, EdgeDetector, LaserLine};
 use xsurf_core::geom::Vec3;
 use xsurf_core::merge::refine::{Record, RefinementFile, Status};
 use xsurf_core::pose::table_from_carm;
@@ -467,14 +467,16 @@ fn cmd_placement(args: &[String]) -> anyhow::Result<()> {
 /// Pixel positions and the image size.
 type Pixels = (Vec<[f64; 2]>, (u32, u32));
 
-fn line_pixels(path: &Path) -> Result<Pixels, String> {
+fn line_pixels(path: &Path, channel: Option<Channel>) -> Result<Pixels, String> {
     // The caller names the file: its reason alone (the reader's error names it too).
     let img = xsurf_formats::frames::read_frame(path).map_err(|e| {
         let e = e.to_string();
         e.strip_prefix(&format!("{}: ", path.display())).map_or(e.clone(), str::to_owned)
     })?;
     let view = img.view().map_err(|e| e.to_string())?;
-    let mut det = EdgeDetector::new(EdgeConfig::default()).map_err(|e| e.to_string())?;
+    let d = EdgeConfig::default();
+    let mut det =
+        EdgeDetector::new(EdgeConfig { channel: channel.unwrap_or(d.channel), ..d }).map_err(|e| e.to_string())?;
     let mut line = LaserLine::default();
     det.detect(&view, &mut line).map_err(|e| e.to_string())?;
     let px: Vec<[f64; 2]> = line
@@ -490,9 +492,15 @@ fn line_pixels(path: &Path) -> Result<Pixels, String> {
 /// An image of the laser calibration: its file, camera and tabletop height.
 type LaserFile = (PathBuf, String, f64);
 
-/// The laser line's pixels of each image, with its camera's geometry from the rig and the
+/// The laser line's pixels of each image (in `channel`: a laser's colour against the others;
+/// `None`, the edge detector's default), with its camera's geometry from the rig and the
 /// tabletop height; and each image's file, camera and height.
-fn laser_views(groups: &[Group], rig: &Rig, rig_path: &Path) -> anyhow::Result<(Vec<LaserView>, Vec<LaserFile>)> {
+fn laser_views(
+    groups: &[Group],
+    rig: &Rig,
+    rig_path: &Path,
+    channel: Option<Channel>,
+) -> anyhow::Result<(Vec<LaserView>, Vec<LaserFile>)> {
     let mut views = Vec::new();
     let mut files = Vec::new();
     for g in groups {
@@ -503,7 +511,7 @@ fn laser_views(groups: &[Group], rig: &Rig, rig_path: &Path) -> anyhow::Result<(
             cam.geometry().map_err(|e| anyhow!("rig file {}: camera {}: {e}", rig_path.display(), g.camera))?;
         let heights = per_image_values(g, "--heights")?;
         for (p, &h) in g.images.iter().zip(&heights) {
-            let (pixels, size) = line_pixels(p).map_err(|e| anyhow!("{}: {e}", p.display()))?;
+            let (pixels, size) = line_pixels(p, channel).map_err(|e| anyhow!("{}: {e}", p.display()))?;
             if size != (cam.width, cam.height) {
                 bail!(
                     "{}: image is {}x{}, camera {} is {}x{}",
@@ -530,32 +538,91 @@ fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
     if o.groups.is_empty() {
         return Err(usage("give at least one --camera NAME --heights H[,H...] IMAGE..."));
     }
-    let (views, files) = laser_views(&o.groups, &rig, &rig_path)?;
-    let reference = Vec3::new(rig.laser_plane[0], rig.laser_plane[1], rig.laser_plane[2]);
-    let r = laser::calibrate(&views, reference).map_err(|e| {
-        // Name the files behind "view N".
-        let mut msg = format!("laser plane: {e}");
-        for (i, (p, c, h)) in files.iter().enumerate() {
-            msg = msg.replace(&format!("view {i}:"), &format!("{} ({c}, height {h} m):", p.display()));
-        }
-        anyhow!(msg)
-    })?;
-    let old = rig.laser_plane;
-    rig.laser_plane = r.plane.to_params();
-    let p = rig.laser_plane;
-    println!(
-        "laser_plane [{:.6}, {:.6}, {:.6}, {:.6}] (was {old:?}); RMS {:.3} mm, max {:.3} mm over {} points ({} dropped)",
-        p[0],
-        p[1],
-        p[2],
-        p[3],
-        r.rms_m * 1e3,
-        r.max_m * 1e3,
-        r.used,
-        r.dropped
-    );
     let dir = report_dir(&o, &out, "laser");
     std::fs::create_dir_all(&dir).with_context(|| format!("report folder {}", dir.display()))?;
+    // A scanner with several lasers: each plane from its own colour in the same images.
+    let lasers: Vec<(Option<usize>, Option<Channel>, [f64; 4])> = if rig.lasers.is_empty() {
+        vec![(None, None, rig.laser_plane)]
+    } else {
+        rig.lasers
+            .iter()
+            .enumerate()
+            .map(|(k, l)| (Some(k), Some(Channel::against_others(l.channel)), l.plane))
+            .collect()
+    };
+    let mut reports = Vec::new();
+    for (k, channel, old) in lasers {
+        let name = k.map_or_else(|| "laser_plane".to_string(), |k| format!("laser.{}.plane", rig.lasers[k].name));
+        let (views, files) = laser_views(&o.groups, &rig, &rig_path, channel)?;
+        let r = laser::calibrate(&views, Vec3::new(old[0], old[1], old[2])).map_err(|e| {
+            // Name the files behind "view N".
+            let mut msg = format!("{name}: {e}");
+            for (i, (p, c, h)) in files.iter().enumerate() {
+                msg = msg.replace(&format!("view {i}:"), &format!("{} ({c}, height {h} m):", p.display()));
+            }
+            anyhow!(msg)
+        })?;
+        let p = r.plane.to_params();
+        match k {
+            None => rig.laser_plane = p,
+            Some(k) => rig.lasers[k].plane = p,
+        }
+        println!(
+            "{name} [{:.6}, {:.6}, {:.6}, {:.6}] (was {old:?}); RMS {:.3} mm, max {:.3} mm over {} points ({} dropped)",
+            p[0],
+            p[1],
+            p[2],
+            p[3],
+            r.rms_m * 1e3,
+            r.max_m * 1e3,
+            r.used,
+            r.dropped
+        );
+        let file =
+            if k.is_some() { format!("residuals_{}.png", name.replace('.', "_")) } else { "residuals.png".into() };
+        let images = laser_report(&views, &files, &r, &dir.join(file))?;
+        reports.push(json!({"parameter": name, "plane": p, "rms_m": r.rms_m, "max_m": r.max_m,
+                            "used": r.used, "dropped": r.dropped, "images": images}));
+    }
+    if let Some(first) = rig.lasers.first() {
+        // The collimator's plane (the X-ray fan beam's) is the first laser's.
+        rig.laser_plane = first.plane;
+    }
+    xsurf_formats::rig::write(
+        &out,
+        &rig,
+        "xsurf rig file (see launch-config/rig_study.yaml); laser planes by `xsurf calibrate laser`",
+    )?;
+    let p = rig.laser_plane;
+    let mut params = format!(
+        "# Written by `xsurf calibrate laser`: the laser planes for every node (--params-file).\n/**:\n  ros__parameters:\n    laser_plane: [{}, {}, {}, {}]\n",
+        p[0], p[1], p[2], p[3]
+    );
+    if !rig.lasers.is_empty() {
+        params.push_str(&crate::lasers::params_yaml(&rig.lasers));
+    }
+    write_bytes_atomic(&dir.join("params.yaml"), params.as_bytes())?;
+    let single = reports.len() == 1 && rig.lasers.is_empty();
+    let report = if single {
+        let mut r = reports.remove(0);
+        r["kind"] = json!("laser");
+        r["laser_plane"] = json!(rig.laser_plane);
+        r
+    } else {
+        json!({"kind": "laser", "laser_plane": rig.laser_plane, "lasers": reports})
+    };
+    write_json(&dir.join("report.json"), &report)?;
+    println!("written {}; report and params.yaml: {}", out.display(), dir.display());
+    Ok(())
+}
+
+/// One laser's residuals per image: printed, plotted into `png`, and returned for the report.
+fn laser_report(
+    views: &[LaserView],
+    files: &[LaserFile],
+    r: &laser::LaserResult,
+    png: &Path,
+) -> anyhow::Result<Vec<serde_json::Value>> {
     let mut images = Vec::new();
     let lim = r.max_m.max(1e-4) * 1.2e3;
     let rows = views.iter().flat_map(|v| v.pixels.iter().map(|p| p[1])).fold(1.0f64, f64::max);
@@ -574,19 +641,8 @@ fn cmd_laser(args: &[String]) -> anyhow::Result<()> {
             plot.legend(i, &format!("{c} H {h:.3}"), palette(i));
         }
     }
-    plot.write_png(&dir.join("residuals.png"))?;
-    xsurf_formats::rig::write(
-        &out,
-        &rig,
-        "xsurf rig file (see launch-config/rig_study.yaml); laser_plane by `xsurf calibrate laser`",
-    )?;
-    write_json(
-        &dir.join("report.json"),
-        &json!({"kind": "laser", "laser_plane": rig.laser_plane, "rms_m": r.rms_m, "max_m": r.max_m,
-                "used": r.used, "dropped": r.dropped, "images": images}),
-    )?;
-    println!("written {}; report: {}", out.display(), dir.display());
-    Ok(())
+    plot.write_png(png)?;
+    Ok(images)
 }
 
 /// `xsurf calibrate scan BAG --rig RIG`: the placement of each further camera refined against
@@ -719,12 +775,26 @@ struct SynthSet {
     /// The board views' file type: the hard set's are JPEG at quality 75, as most calibration
     /// sets are.
     ext: &'static str,
+    /// The three-laser scanner ([`Rig::three_lasers`]): its laser views in colour.
+    three: bool,
 }
 
 impl SynthSet {
     fn parse(args: &[String]) -> anyhow::Result<SynthSet> {
-        let o =
-            Opts::parse(args, &["--size", "--board", "--square", "--views", "--noise", "--seed", "--preset"], None)?;
+        let o = Opts::parse(
+            args,
+            &["--size", "--board", "--square", "--views", "--noise", "--seed", "--preset", "--lasers"],
+            None,
+        )?;
+        let three = match o.get("--lasers").unwrap_or("1") {
+            "1" => false,
+            "3" => true,
+            n => {
+                return Err(usage(format!(
+                    "--lasers {n}: 1 (the collimator) or 3 (Rig::three_lasers, rgb8 laser views)"
+                )))
+            }
+        };
         let [dir] = &o.positional[..] else { return Err(usage("calibrate synth needs one output folder")) };
         let name = o.get("--preset").unwrap_or("ideal");
         let preset = Preset::parse(name).ok_or_else(|| usage(format!("--preset {name:?}: ideal or hard")))?;
@@ -760,6 +830,7 @@ impl SynthSet {
             exposure: if hard { Exposure::hard() } else { Exposure { noise_sigma: noise, ..Exposure::default() } },
             looks: (look.clone(), BoardLook { background: 0.85, ..look }),
             ext: if hard { "jpg" } else { "png" },
+            three,
         })
     }
 
@@ -768,13 +839,11 @@ impl SynthSet {
         if path.extension().is_some_and(|e| e == "jpg") {
             xsurf_formats::frames::write_jpeg(path, img, SYNTH_JPEG_QUALITY)?;
         } else {
-            xsurf_formats::image::write_png(
-                path,
-                img.width,
-                img.height,
-                xsurf_formats::image::PngKind::Grey8,
-                &img.data,
-            )?;
+            let kind = match img.encoding {
+                xsurf_core::image::Encoding::Rgb8 => xsurf_formats::image::PngKind::Rgb8,
+                _ => xsurf_formats::image::PngKind::Grey8,
+            };
+            xsurf_formats::image::write_png(path, img.width, img.height, kind, &img.data)?;
         }
         Ok(())
     }
@@ -838,7 +907,9 @@ impl SynthSet {
             travels.join(","),
             names.join(" ")
         );
-        let mut settings = ScanSettings { noise_sigma: self.noise, seed: seed + 77, ..ScanSettings::default() };
+        let encoding = if self.three { xsurf_core::image::Encoding::Rgb8 } else { xsurf_core::image::Encoding::Mono8 };
+        let mut settings =
+            ScanSettings { noise_sigma: self.noise, seed: seed + 77, encoding, ..ScanSettings::default() };
         self.preset.apply(&mut settings);
         let scanner = Scanner::new(Scene::tabletop(), truth.clone(), self.preset.laser(), settings)?;
         let mut names = Vec::new();
@@ -861,12 +932,29 @@ impl SynthSet {
     }
 }
 
+/// [`Rig::three_lasers`] as mounted: each laser off its design by a fraction of a degree about
+/// its source and a millimetre or two along the travel (what the laser calibration is for).
+fn mounted_three_lasers(size: (u32, u32)) -> Rig {
+    let mut rig = Rig::three_lasers(size.0, size.1);
+    for (l, (deg, shift_m)) in rig.lasers.iter_mut().zip([(0.15, 0.0005), (0.6, 0.0015), (-0.5, -0.0012)]) {
+        let (sn, cs) = f64::to_radians(deg).sin_cos();
+        let [nx, ny, nz, _] = l.plane;
+        // Turned about the X axis through the source, then moved along Y with it.
+        let n = [nx, cs * ny - sn * nz, sn * ny + cs * nz];
+        l.source[1] += shift_m;
+        let d = n[0] * l.source[0] + n[1] * l.source[1] + n[2] * l.source[2];
+        l.plane = [n[0], n[1], n[2], d];
+    }
+    rig.laser_plane = rig.lasers[0].plane;
+    rig
+}
+
 /// `xsurf calibrate synth DIR`: a calibration set rendered from the study's rig, with the
 /// true rig and the commands that calibrate from it.
 fn synth(args: &[String]) -> anyhow::Result<()> {
     let set = SynthSet::parse(args)?;
     let dir = &set.dir;
-    let truth = Rig::study(set.size.0, set.size.1);
+    let truth = if set.three { mounted_three_lasers(set.size) } else { Rig::study(set.size.0, set.size.1) };
     for sub in ["intrinsics", "placement", "laser"] {
         std::fs::create_dir_all(dir.join(sub)).with_context(|| format!("{}", dir.join(sub).display()))?;
     }
@@ -882,6 +970,13 @@ fn synth(args: &[String]) -> anyhow::Result<()> {
     let mut script = set.script_head();
     let mut placement_args =
         format!("\"$XSURF\" calibrate placement $B --board-origin {},{},0 -o rig.yaml", origin.x, origin.y);
+    if set.three {
+        // The scanner as designed (cameras and lasers: names, colours, nominal planes): what
+        // the placement starts from and the laser calibration corrects.
+        let nominal = Rig::three_lasers(set.size.0, set.size.1);
+        xsurf_formats::rig::write(&dir.join("nominal_rig.yaml"), &nominal, "the scanner as designed")?;
+        placement_args.push_str(" --rig nominal_rig.yaml");
+    }
     let mut laser_args = String::from("\"$XSURF\" calibrate laser --rig rig.yaml");
     for ci in 0..truth.cameras.len() {
         let (intrinsics, placement, laser) = set.camera(&truth, ci, &board_pose)?;
