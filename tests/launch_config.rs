@@ -201,3 +201,49 @@ fn the_launch_file_example_recorder_parses_when_uncommented() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The three-laser scanner's files (issue 20): its rig is `Rig::three_lasers`, its launch file
+/// starts the whole graph with its params file and rig, every node builds from them, and each
+/// node that uses the lasers has the rig's; its rviz config colours the clouds by laser.
+#[test]
+fn the_three_laser_files_configure_the_three_laser_scanner() {
+    let text = std::fs::read_to_string(root().join("launch-config/rig_three_lasers.yaml")).unwrap();
+    let rig: xsurf_core::rig::Rig = serde_yaml::from_str(&text).unwrap();
+    assert_eq!(rig, xsurf_core::rig::Rig::three_lasers(640, 480));
+    let one = xsurf_nodes::launch::load(&root().join("launch-config/xsurf.launch.yaml"), &Default::default()).unwrap();
+    let file = root().join("launch-config/xsurf_three_lasers.launch.yaml");
+    let nodes = xsurf_nodes::launch::load(&file, &Default::default()).unwrap();
+    assert_eq!(nodes.iter().map(|n| n.fq_name()).collect::<Vec<_>>(), one.iter().map(|n| n.fq_name()).collect::<Vec<_>>());
+    for n in &nodes {
+        let mut args = vec!["--ros-args".to_string(), "--params-file".into(), n.param_files[0].to_string_lossy().into_owned()];
+        for (name, v) in &n.params {
+            args.extend(["-p".into(), format!("{name}:={}", v.as_str().unwrap())]);
+        }
+        let ros = RosArgs::parse(&args).unwrap();
+        let o = ros.param_overrides(&n.fq_name()).unwrap();
+        let p = Params::resolve(&components::declarations(&n.exec).unwrap(), &o).unwrap();
+        components::build(&n.exec, &p).unwrap_or_else(|e| panic!("{}: {e}", n.fq_name()));
+        if ["camera_driver", "c_arm_pose"].contains(&n.exec.as_str()) {
+            assert!(n.params.iter().any(|(k, v)| k == "rig_file" && v.as_str().unwrap().ends_with("rig_three_lasers.yaml")));
+        }
+        if ["camera_driver", "edge_detector", "triangulator", "mesher", "merger"].contains(&n.exec.as_str()) {
+            let names: Vec<String> = rig.lasers.iter().map(|l| l.name.clone()).collect();
+            assert_eq!(p.get("lasers"), Some(&ParamValue::StringArray(names.clone())), "{}", n.fq_name());
+            let lasers = xsurf_nodes::lasers::from_params(&p, &names, [0.0; 3]).unwrap().unwrap();
+            for (a, b) in lasers.iter().zip(&rig.lasers) {
+                assert_eq!((&a.name, a.channel, a.source), (&b.name, b.channel, b.source));
+                assert!(a.plane.iter().zip(&b.plane).all(|(x, y)| (x - y).abs() < 1e-12), "{}: {a:?}", n.fq_name());
+            }
+        }
+    }
+    let rviz = std::fs::read_to_string(root().join("launch-config/xsurf_three_lasers.rviz")).unwrap();
+    let doc: serde_yaml::Value = serde_yaml::from_str(&rviz).unwrap();
+    let by_laser: Vec<&str> = doc["Visualization Manager"]["Displays"]
+        .as_sequence()
+        .unwrap()
+        .iter()
+        .filter(|d| d["Channel Name"] == "laser" && d["Enabled"] == true)
+        .filter_map(|d| d["Topic"]["Value"].as_str())
+        .collect();
+    assert_eq!(by_laser, ["/surface/cloud", "/cam1/cloud", "/cam2/cloud"]);
+}
