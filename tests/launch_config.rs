@@ -213,9 +213,13 @@ fn the_three_laser_files_configure_the_three_laser_scanner() {
     let one = xsurf_nodes::launch::load(&root().join("launch-config/xsurf.launch.yaml"), &Default::default()).unwrap();
     let file = root().join("launch-config/xsurf_three_lasers.launch.yaml");
     let nodes = xsurf_nodes::launch::load(&file, &Default::default()).unwrap();
-    assert_eq!(nodes.iter().map(|n| n.fq_name()).collect::<Vec<_>>(), one.iter().map(|n| n.fq_name()).collect::<Vec<_>>());
+    assert_eq!(
+        nodes.iter().map(|n| n.fq_name()).collect::<Vec<_>>(),
+        one.iter().map(|n| n.fq_name()).collect::<Vec<_>>()
+    );
     for n in &nodes {
-        let mut args = vec!["--ros-args".to_string(), "--params-file".into(), n.param_files[0].to_string_lossy().into_owned()];
+        let mut args =
+            vec!["--ros-args".to_string(), "--params-file".into(), n.param_files[0].to_string_lossy().into_owned()];
         for (name, v) in &n.params {
             args.extend(["-p".into(), format!("{name}:={}", v.as_str().unwrap())]);
         }
@@ -224,7 +228,10 @@ fn the_three_laser_files_configure_the_three_laser_scanner() {
         let p = Params::resolve(&components::declarations(&n.exec).unwrap(), &o).unwrap();
         components::build(&n.exec, &p).unwrap_or_else(|e| panic!("{}: {e}", n.fq_name()));
         if ["camera_driver", "c_arm_pose"].contains(&n.exec.as_str()) {
-            assert!(n.params.iter().any(|(k, v)| k == "rig_file" && v.as_str().unwrap().ends_with("rig_three_lasers.yaml")));
+            assert!(n
+                .params
+                .iter()
+                .any(|(k, v)| k == "rig_file" && v.as_str().unwrap().ends_with("rig_three_lasers.yaml")));
         }
         if ["camera_driver", "edge_detector", "triangulator", "mesher", "merger"].contains(&n.exec.as_str()) {
             let names: Vec<String> = rig.lasers.iter().map(|l| l.name.clone()).collect();
@@ -246,4 +253,62 @@ fn the_three_laser_files_configure_the_three_laser_scanner() {
         .filter_map(|d| d["Topic"]["Value"].as_str())
         .collect();
     assert_eq!(by_laser, ["/surface/cloud", "/cam1/cloud", "/cam2/cloud"]);
+}
+
+/// A bad `lasers` configuration stops the node at start-up with an error naming the parameter
+/// (what every host does with a node's parameters before it opens DDS), and `xsurf reconstruct`
+/// exits 2 with it, writing nothing.
+#[test]
+fn bad_laser_configurations_name_the_parameter() {
+    let good = std::fs::read_to_string(root().join("launch-config/params_three_lasers.yaml")).unwrap();
+    let cases: [(&str, &str, &str, &[&str]); 5] = [
+        (
+            "laser.left.channel: green",
+            "laser.left.channel: red",
+            "laser.left.channel",
+            &["edge_detector", "triangulator", "mesher", "merger"],
+        ),
+        (
+            "laser.right.plane: [0, 0.9063077870366499, -0.42261826174069944, 0.072504622962932]",
+            "laser.right.plane: [0, 0.9, -0.5, 0.07]",
+            "laser.right.plane",
+            &["triangulator", "merger", "edge_detector"],
+        ),
+        (
+            "    laser.left.plane: [0, 0.9063077870366499, 0.42261826174069944, -0.072504622962932]\n",
+            "",
+            "laser.left.plane",
+            &["triangulator", "edge_detector"],
+        ),
+        ("laser.right.channel: blue", "laser.right.channel: violet", "laser.right.channel", &["edge_detector"]),
+        ("    encoding: rgb8", "    encoding: mono8", "laser.left.channel", &["camera_driver"]),
+    ];
+    let dir = scratch("bad-lasers");
+    for (from, to, names, nodes) in cases {
+        assert!(good.contains(from), "{from}");
+        let path = dir.join("p.yaml");
+        std::fs::write(&path, good.replacen(from, to, 1)).unwrap();
+        let ros = RosArgs::parse(&["--ros-args", "--params-file", path.to_str().unwrap()]).unwrap();
+        for node in nodes {
+            let fq = if *node == "merger" { "/merger".to_string() } else { format!("/cam1/{node}") };
+            let o = ros.param_overrides(&fq).unwrap();
+            let p = Params::resolve(&components::declarations(node).unwrap(), &o).unwrap();
+            let e = components::build(node, &p).err().unwrap_or_else(|| panic!("{fq} started with {to:?}")).to_string();
+            eprintln!("{fq}: {e}");
+            assert!(e.contains(names), "{fq}: {e}");
+        }
+        if *nodes != ["camera_driver"] {
+            let out = dir.join("out");
+            let r = xsurf(&[
+                "reconstruct",
+                pyramid_bag().to_str().unwrap(),
+                "--params-file",
+                path.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ]);
+            assert_clean_failure(&r, 2, names);
+            assert!(std::fs::read_dir(&out).map_or(true, |mut d| d.next().is_none()), "nothing written");
+        }
+    }
 }

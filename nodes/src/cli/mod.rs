@@ -829,6 +829,9 @@ pub fn main() -> ExitCode {
             if e.downcast_ref::<UsageError>().is_some() {
                 eprintln!("{}", command_usage(&args));
                 ExitCode::from(2)
+            } else if e.downcast_ref::<xsurf_runtime::params::ParamError>().is_some() {
+                // A refused parameter (a params file's bad value): as a node executable, exit 2.
+                ExitCode::from(2)
             } else if e.downcast_ref::<Incomplete>().is_some() {
                 ExitCode::from(3)
             } else {

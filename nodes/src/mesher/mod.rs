@@ -52,8 +52,10 @@ struct Config {
     lasers: usize,
 }
 
-fn config(p: &Params) -> Result<Config, ParamError> {
-    let p = MesherParams::from_params(p)?;
+fn config(raw: &Params) -> Result<Config, ParamError> {
+    let p = MesherParams::from_params(raw)?;
+    // Checked as every node checks them, though only their number shapes the grid.
+    crate::lasers::from_params(raw, &p.lasers, [0.0; 3])?;
     let mesh = MeshConfig {
         max_edge_m: p.max_edge_m,
         max_edge_per_m: p.max_edge_per_m,
