@@ -50,6 +50,8 @@ struct Config {
     /// The lasers, each a block of every profile's samples (0: `lasers` unset, one laser and
     /// no `laser` field in the cloud).
     lasers: usize,
+    /// Their names (`lasers`), for the namespaces of their meshes.
+    laser_names: Vec<String>,
 }
 
 fn config(raw: &Params) -> Result<Config, ParamError> {
@@ -83,6 +85,7 @@ fn config(raw: &Params) -> Result<Config, ParamError> {
         end_grace_ns: (p.end_grace_s * 1e9) as i64,
         orientation: p.line_orientation,
         lasers: p.lasers.len(),
+        laser_names: p.lasers,
     })
 }
 
@@ -419,10 +422,11 @@ impl MesherNode {
         out.publish(Output::Report, Msg::Text(Arc::new(StringMsg { data: report })));
         self.active = false;
         self.scans += 1;
-        let mesh = match &blocks[..] {
-            [one] => mesh_grid(one, &self.cfg.mesh),
+        let meshes: Vec<Mesh> = blocks.iter().map(|b| mesh_grid(b, &self.cfg.mesh)).collect();
+        let mesh = match &meshes[..] {
+            [one] => one.clone(),
             several => several.iter().fold(Mesh::default(), |mut m, b| {
-                m.append(&mesh_grid(b, &self.cfg.mesh));
+                m.append(b);
                 m
             }),
         };
@@ -436,9 +440,24 @@ impl MesherNode {
             out.publish(Output::Mesh, Msg::Marker(Arc::new(clear)));
             self.growing = Growing::default();
         }
-        let marker = Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header, &self.camera, self.scan_id as i32, 1.0)));
-        out.publish(Output::Mesh, marker.clone());
-        self.last_mesh.set(vec![(Output::Mesh, marker)]);
+        // With lasers, each laser's mesh is a marker of its own, in namespace `<camera>.<laser>`.
+        let id = self.scan_id as i32;
+        let markers: Vec<(Output, Msg)> = if self.cfg.laser_names.is_empty() {
+            vec![(Output::Mesh, Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header, &self.camera, id, 1.0))))]
+        } else {
+            meshes
+                .iter()
+                .zip(&self.cfg.laser_names)
+                .map(|(m, l)| {
+                    let ns = format!("{}.{l}", self.camera);
+                    (Output::Mesh, Msg::Marker(Arc::new(convert::mesh_marker(m, header.clone(), &ns, id, 1.0))))
+                })
+                .collect()
+        };
+        for (port, m) in &markers {
+            out.publish(*port, m.clone());
+        }
+        self.last_mesh.set(markers);
         if grid.valid() == 0 {
             log::warn!("{}: scan {} has no points; nothing written", self.camera, self.scan_id);
             return;

@@ -509,4 +509,90 @@ mod tests {
         }
         assert_eq!(h.counter("points"), Some(seen as u64));
     }
+
+    /// Two lasers: one line message with a block per laser; each block is intersected with its
+    /// own plane (the collimator's y = 0 and a plane tilted 25 degrees), the profile stacks
+    /// them with the field `laser`, and a line of other lasers than the node's is refused.
+    #[test]
+    fn each_laser_block_is_placed_on_its_own_plane() {
+        use xsurf_core::geom::Vec3;
+        use xsurf_runtime::harness::Harness;
+        use xsurf_runtime::params::ParamValue as V;
+        let rig = xsurf_core::rig::Rig::three_lasers(64, 48);
+        let cam = rig.camera("cam2").unwrap();
+        let (model, carm_from_optical) = (cam.model().unwrap(), cam.carm_from_optical());
+        let lasers = [&rig.lasers[0], &rig.lasers[2]];
+        let n = 48;
+        let mut line = LaserLine {
+            image_width: 64,
+            image_height: 48,
+            orientation: LaserLine::ORIENTATION_VERTICAL,
+            lasers: lasers.iter().map(|l| l.name.clone()).collect(),
+            ..LaserLine::default()
+        };
+        let mut truth = Vec::new();
+        for l in lasers {
+            let [_, ny, nz, d] = l.plane;
+            let mut block = vec![None; n];
+            let (mut u, mut v) = (vec![f32::NAN; n], vec![f32::NAN; n]);
+            for k in 0..4000 {
+                let x = -0.3 + 0.6 * f64::from(k) / 4000.0;
+                let z = 0.04 + 0.02 * (x * 9.0).cos();
+                let p = Vec3::new(x, (d - nz * z) / ny, z);
+                let Some((pu, pv)) = model.project(carm_from_optical.inverse().transform_point(p)) else { continue };
+                let row = pv.round();
+                if !(0.0..64.0).contains(&pu) || !(0.0..48.0).contains(&row) || block[row as usize].is_some() {
+                    continue;
+                }
+                (u[row as usize], v[row as usize]) = (pu as f32, pv as f32);
+                block[row as usize] = Some(p);
+            }
+            assert!(block.iter().flatten().count() > 20, "{} crosses the image", l.name);
+            line.strength.extend(u.iter().map(|u| if u.is_finite() { 60.0 } else { 0.0 }));
+            line.width.extend(u.iter().map(|u| if u.is_finite() { 3.0 } else { 0.0 }));
+            line.u.extend(u);
+            line.v.extend(v);
+            truth.extend(block);
+        }
+        line.header = convert::header(1_040_000_000, "cam2_optical_frame");
+        let mut o: BTreeMap<String, V> = BTreeMap::new();
+        o.insert("lasers".into(), V::StringArray(line.lasers.clone()));
+        for l in lasers {
+            o.insert(format!("laser.{}.plane", l.name), V::DoubleArray(l.plane.to_vec()));
+            o.insert(format!("laser.{}.channel", l.name), V::String(l.channel.name().into()));
+        }
+        let params = Params::resolve(&TriangulatorParams::declarations(), &o).unwrap();
+        let mut h = Harness::new(boxed(TriangulatorNode::new(&params).unwrap()), "triangulator", "/cam2");
+        let pose = |t| {
+            let e = xsurf_core::pose::table_from_carm(0.0, 0.0, 0.0);
+            Msg::Tf(Arc::new(TFMessage { transforms: vec![convert::transform_stamped(t, "table", "carm", &e)] }))
+        };
+        let statics = TFMessage {
+            transforms: vec![convert::transform_stamped(0, "carm", "cam2_optical_frame", &carm_from_optical)],
+        };
+        let info = convert::camera_info(&model, line.header.clone());
+        let other = LaserLine { lasers: vec!["collimator".into(), "left".into()], ..line.clone() };
+        h.feed("/cam2/camera_info", &Msg::CameraInfo(Arc::new(info)))
+            .feed("/tf_static", &Msg::Tf(Arc::new(statics)))
+            .feed("/tf", &pose(1_000_000_000))
+            .feed("/tf", &pose(1_100_000_000))
+            .feed("/cam2/laser_line", &Msg::LaserLine(Arc::new(line)))
+            .feed("/cam2/laser_line", &Msg::LaserLine(Arc::new(other)));
+        assert_eq!(h.errors(), 1);
+        assert!(h.last_error().unwrap().contains("this node's lasers"), "{:?}", h.last_error());
+        let out = h.take("/cam2/profile");
+        let Msg::Cloud(cloud) = &out[0] else { panic!("a profile is a PointCloud2") };
+        assert_eq!((cloud.height, cloud.width), (96, 1));
+        let points = xsurf_msgs::pointcloud::read(cloud).unwrap();
+        for (r, (p, t)) in points.iter().zip(&truth).enumerate() {
+            assert_eq!(p.laser, Some((r / n) as f32));
+            match t {
+                Some(t) => {
+                    let d = Vec3::new(f64::from(p.xyz[0]), f64::from(p.xyz[1]), f64::from(p.xyz[2])) - *t;
+                    assert!(d.norm() < 2e-5, "row {r}: {:?} against {t:?}", p.xyz);
+                }
+                None => assert!(p.xyz[0].is_nan(), "row {r}"),
+            }
+        }
+    }
 }
