@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{assert_clean_failure, checker, scratch, xsurf};
+use common::{assert_clean_failure, checker, read_ply, reconstruct, scratch, xsurf};
 use std::process::Command;
 use xsurf_core::geom::Plane;
 use xsurf_core::rig::Rig;
@@ -359,18 +359,9 @@ fn three_lasers_calibrate_each_in_its_colour() {
     let scene = xsurf_core::synth::Scene::by_name("box").unwrap();
     let rms = |params: &std::path::Path, name: &str| {
         let o = dir.join(name);
-        let out = xsurf(&[
-            "reconstruct",
-            bag.to_str().unwrap(),
-            "--params-file",
-            params.to_str().unwrap(),
-            "--out",
-            o.to_str().unwrap(),
-        ]);
+        let out = reconstruct(&bag, params, &o);
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-        let m =
-            xsurf_formats::ply::read(&mut std::io::BufReader::new(std::fs::File::open(o.join("merged.ply")).unwrap()))
-                .unwrap();
+        let m = read_ply(&o.join("merged.ply"));
         xsurf_core::eval::accuracy(xsurf_core::eval::surface_errors(&scene, &m.positions))
     };
     let (t, c) = (rms(&bag.join("params.yaml"), "true"), rms(&dir.join("rig_laser_report/params.yaml"), "calibrated"));

@@ -51,6 +51,18 @@ pub fn xsurf(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_xsurf")).args(args).output().unwrap()
 }
 
+/// Runs `xsurf reconstruct BAG --params-file PARAMS --out OUT`.
+pub fn reconstruct(bag: &Path, params: &Path, out: &Path) -> Output {
+    let s = |p: &Path| p.to_string_lossy().into_owned();
+    xsurf(&["reconstruct", &s(bag), "--params-file", &s(params), "--out", &s(out)])
+}
+
+/// A PLY file's mesh.
+pub fn read_ply(path: &Path) -> xsurf_core::mesh::Mesh {
+    let f = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    xsurf_formats::ply::read(&mut std::io::BufReader::new(f)).unwrap()
+}
+
 /// Asserts that a run failed cleanly: the expected exit code, no panic, and stderr naming `what`.
 pub fn assert_clean_failure(out: &Output, code: i32, what: &str) {
     let err = String::from_utf8_lossy(&out.stderr);

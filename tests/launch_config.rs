@@ -299,14 +299,7 @@ fn bad_laser_configurations_name_the_parameter() {
         }
         if *nodes != ["camera_driver"] {
             let out = dir.join("out");
-            let r = xsurf(&[
-                "reconstruct",
-                pyramid_bag().to_str().unwrap(),
-                "--params-file",
-                path.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ]);
+            let r = reconstruct(pyramid_bag(), &path, &out);
             assert_clean_failure(&r, 2, names);
             assert!(std::fs::read_dir(&out).map_or(true, |mut d| d.next().is_none()), "nothing written");
         }

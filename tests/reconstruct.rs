@@ -1070,14 +1070,7 @@ fn a_three_laser_scan_reconstructs_through_the_graph() {
     let params = std::fs::read_to_string(bag.join("params.yaml")).unwrap();
     assert!(params.contains("lasers: [collimator, left, right]"), "{params}");
     let o = dir.join("out");
-    let r = xsurf(&[
-        "reconstruct",
-        bag.to_str().unwrap(),
-        "--params-file",
-        bag.join("params.yaml").to_str().unwrap(),
-        "--out",
-        o.to_str().unwrap(),
-    ]);
+    let r = common::reconstruct(&bag, &bag.join("params.yaml"), &o);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let wrl = std::fs::read_to_string(o.join("scene.wrl")).unwrap();
     for cam in ["cam1", "cam2"] {
@@ -1085,14 +1078,12 @@ fn a_three_laser_scan_reconstructs_through_the_graph() {
             assert!(wrl.contains(&format!("DEF {cam}_{laser}")), "{cam}.{laser} in scene.wrl");
         }
     }
-    let read =
-        |p: &Path| xsurf_formats::ply::read(&mut std::io::BufReader::new(std::fs::File::open(p).unwrap())).unwrap();
-    let merged = read(&o.join("merged.ply"));
+    let merged = common::read_ply(&o.join("merged.ply"));
     let scene = xsurf_core::synth::Scene::by_name("box").unwrap();
     let acc = xsurf_core::eval::accuracy(xsurf_core::eval::surface_errors(&scene, &merged.positions));
     let truth: Vec<xsurf_core::geom::Vec3> = ["cam1", "cam2"]
         .iter()
-        .flat_map(|c| read(&bag.join(format!("truth_{c}.ply"))).positions)
+        .flat_map(|c| common::read_ply(&bag.join(format!("truth_{c}.ply"))).positions)
         .map(|p| xsurf_core::geom::Vec3::new(p[0].into(), p[1].into(), p[2].into()))
         .collect();
     let cov = xsurf_core::eval::coverage(&truth, &merged.positions, 0.003);

@@ -111,10 +111,11 @@ impl Grid {
         let n = self.samples / blocks;
         (0..blocks).map(|k| self.rows(k * n..(k + 1) * n)).collect()
     }
-    /// Grids of the same frames stacked sample by sample, the inverse of [`Grid::blocks`].
-    pub fn stacked(grids: &[Grid]) -> Grid {
-        if let [one] = grids {
-            return one.clone();
+    /// Grids of the same frames stacked sample by sample, the inverse of [`Grid::blocks`]; one
+    /// grid is itself, moved.
+    pub fn stacked(mut grids: Vec<Grid>) -> Grid {
+        if grids.len() == 1 {
+            return grids.swap_remove(0);
         }
         let samples = grids.iter().map(|g| g.samples).sum();
         let mut out = Grid::new(samples);
@@ -122,7 +123,7 @@ impl Grid {
         let has_rgb = grids.iter().any(|g| g.has_rgb);
         for f in 0..frames {
             let mut p = Profile { rgb: has_rgb.then(Vec::new), ..Default::default() };
-            for g in grids {
+            for g in &grids {
                 let at = f * g.samples..(f + 1) * g.samples;
                 p.points.extend_from_slice(&g.points[at.clone()]);
                 p.intensity.extend_from_slice(&g.intensity[at.clone()]);
@@ -1137,7 +1138,7 @@ mod tests {
         assert_eq!(b.iter().map(Grid::samples).collect::<Vec<_>>(), vec![10, 10, 10]);
         assert_eq!(b[1].point(4, 5), g.point(14, 5));
         assert_eq!(b[2].stamps_ns(), g.stamps_ns());
-        assert_eq!(Grid::stacked(&b), g);
+        assert_eq!(Grid::stacked(b), g);
         assert_eq!(g.blocks(1), vec![g.clone()]);
     }
 }

@@ -117,11 +117,6 @@ pub fn transform_stamped(stamp_ns: i64, parent: &str, child: &str, t: &Iso3) -> 
     }
 }
 
-/// The message form of a detected line.
-pub fn line_msg(line: &CoreLine, header: Header) -> LaserLine {
-    lines_msg(std::slice::from_ref(line), &[], header)
-}
-
 /// The message form of several lasers' lines in one image: one block of samples per laser, in
 /// the order of `lasers` (empty: one line, the single laser).
 pub fn lines_msg(lines: &[CoreLine], lasers: &[String], header: Header) -> LaserLine {
@@ -194,19 +189,10 @@ pub enum LineShapeError {
     },
 }
 
-/// The algorithm form of a line message, checking that it describes a line of its image:
-/// arrays of one length, a known orientation, an image within the limits, and one sample per
-/// row (vertical) or column (horizontal).
-pub fn core_line(m: &LaserLine) -> Result<CoreLine, LineShapeError> {
-    let mut lines = core_lines(m)?;
-    if lines.len() != 1 {
-        return Err(LineShapeError::Lasers { got: m.lasers.clone(), expected: Vec::new() });
-    }
-    Ok(lines.remove(0))
-}
-
-/// The algorithm form of a line message of one or several lasers: one line per block of
-/// samples (`lasers`, or one block without), each checked as [`core_line`] checks one.
+/// The algorithm form of a line message, one line per block of samples (`lasers`, or one block
+/// without), checking that each describes a line of its image: arrays of one length, a known
+/// orientation, an image within the limits, and one sample per row (vertical) or column
+/// (horizontal) and laser.
 pub fn core_lines(m: &LaserLine) -> Result<Vec<CoreLine>, LineShapeError> {
     let n = m.u.len();
     if m.v.len() != n || m.strength.len() != n || m.width.len() != n || !(m.rgb.is_empty() || m.rgb.len() == 3 * n) {
@@ -432,6 +418,6 @@ mod tests {
     #[test]
     fn inconsistent_line_is_refused() {
         let m = LaserLine { u: vec![1.0], v: vec![], ..Default::default() };
-        assert!(core_line(&m).is_err());
+        assert!(core_lines(&m).is_err());
     }
 }

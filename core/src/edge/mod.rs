@@ -154,7 +154,7 @@ impl Channel {
             Channel::Red => r,
             Channel::Green => g,
             Channel::Blue => b,
-            Channel::Luma => 0.299 * r + 0.587 * g + 0.114 * b,
+            Channel::Luma => crate::image::luma(r, g, b),
             Channel::RedMinusOthers => (r - 0.5 * (g + b)).max(0.0),
             Channel::GreenMinusOthers => (g - 0.5 * (r + b)).max(0.0),
             Channel::BlueMinusOthers => (b - 0.5 * (r + g)).max(0.0),
@@ -1021,16 +1021,6 @@ impl LaserDetectors {
         Ok(Self { detectors, ..Default::default() })
     }
 
-    /// The lasers, as many as detectors.
-    pub fn len(&self) -> usize {
-        self.detectors.len()
-    }
-
-    /// True without any laser.
-    pub fn is_empty(&self) -> bool {
-        self.detectors.is_empty()
-    }
-
     /// Finds each laser's line in `image`, laser `k`'s into `outs[k]` (`outs` is resized to
     /// the lasers). One laser is found as [`EdgeDetector::detect`] finds it, in any encoding;
     /// several need a colour image.
@@ -1171,11 +1161,7 @@ fn fill_profile(
             Encoding::Rgb8 | Encoding::Bgr8 => {
                 let px = &row[3 * x..3 * x + 3];
                 let (r, g, b) = if enc == Encoding::Rgb8 { (px[0], px[1], px[2]) } else { (px[2], px[1], px[0]) };
-                let (r, g, b) = (f32::from(r), f32::from(g), f32::from(b));
-                match channel {
-                    Channel::Luma => crate::image::luma(r, g, b),
-                    c => c.of(r, g, b),
-                }
+                channel.of(f32::from(r), f32::from(g), f32::from(b))
             }
         }
     };

@@ -379,7 +379,7 @@ impl MergerNode {
             // Each vertex's laser: its grid's, grids being camera-major, laser-minor.
             pointcloud::build_with_laser(header.clone(), 1, pts.len() as u32, |_, c| {
                 let (p, i, rgb) = point(c);
-                (p, i, rgb, vertex_grid.get(c).map_or(0.0, |&g| f32::from(g) % lasers.len() as f32))
+                (p, i, rgb, vertex_grid.get(c).map_or(0.0, |&g| (usize::from(g) % lasers.len()) as f32))
             })
         };
         self.merges += 1;

@@ -47,10 +47,8 @@ struct Config {
     gap_factor: f64,
     end_grace_ns: i64,
     orientation: Orientation,
-    /// The lasers, each a block of every profile's samples (0: `lasers` unset, one laser and
-    /// no `laser` field in the cloud).
-    lasers: usize,
-    /// Their names (`lasers`), for the namespaces of their meshes.
+    /// The lasers (`lasers`), each a block of every profile's samples (empty: one laser, and
+    /// no `laser` field in the cloud); their names are their meshes' namespaces.
     laser_names: Vec<String>,
 }
 
@@ -84,9 +82,15 @@ fn config(raw: &Params) -> Result<Config, ParamError> {
         gap_factor: p.gap_factor,
         end_grace_ns: (p.end_grace_s * 1e9) as i64,
         orientation: p.line_orientation,
-        lasers: p.lasers.len(),
         laser_names: p.lasers,
     })
+}
+
+impl Config {
+    /// The number of lasers (0: `lasers` unset).
+    fn lasers(&self) -> usize {
+        self.laser_names.len()
+    }
 }
 
 /// Frame-gap detection from image stamps.
@@ -338,7 +342,7 @@ impl MesherNode {
         // laser's grid apart.
         let new = self.grid.part(self.growing.from_frame..frames, 1);
         let mut part = Mesh::default();
-        for block in new.blocks(self.cfg.lasers) {
+        for block in new.blocks(self.cfg.lasers()) {
             let sub = block.part(0..block.frames(), self.cfg.preview_stride);
             part.append(&xsurf_core::mesh::mesh_grid_frames(&sub, &self.cfg.mesh, 0..sub.frames()));
         }
@@ -363,7 +367,7 @@ impl MesherNode {
                 "profile has {} samples; the camera (camera_info, {} line, {} laser(s)) gives {n}",
                 p.points.len(),
                 self.cfg.orientation.name(),
-                self.cfg.lasers.max(1)
+                self.cfg.lasers().max(1)
             )));
         }
         if self.grid.frames() == 0 {
@@ -411,29 +415,32 @@ impl MesherNode {
             return;
         }
         // One grid per laser, cleaned and meshed apart; the cloud stacks them again.
-        let mut blocks = self.grid.blocks(self.cfg.lasers);
+        let mut blocks = self.grid.blocks(self.cfg.lasers());
         let rejected: usize = blocks.iter_mut().map(|b| b.clean(&self.cfg.mesh).rejected).sum();
         self.account.points_rejected = rejected as u64;
         self.points_rejected += rejected as u64;
-        let grid = Grid::stacked(&blocks);
         let stamp = self.grid.stamps_ns().last().copied().unwrap_or(0);
-        self.account.final_cloud = Some((stamp, grid.valid()));
+        self.account.final_cloud = Some((stamp, blocks.iter().map(Grid::valid).sum()));
         let report = self.account.report(self.scan_id, &self.camera, aborted, end_ns, self.gaps.nominal_ns());
         out.publish(Output::Report, Msg::Text(Arc::new(StringMsg { data: report })));
         self.active = false;
         self.scans += 1;
         let meshes: Vec<Mesh> = blocks.iter().map(|b| mesh_grid(b, &self.cfg.mesh)).collect();
-        let mesh = match &meshes[..] {
-            [one] => one.clone(),
-            several => several.iter().fold(Mesh::default(), |mut m, b| {
+        let grid = Grid::stacked(blocks);
+        // The camera's mesh; with lasers, also each laser's.
+        let (mesh, per_laser) = if self.cfg.laser_names.is_empty() {
+            (meshes.into_iter().next().unwrap_or_default(), Vec::new())
+        } else {
+            let all = meshes.iter().fold(Mesh::default(), |mut m, b| {
                 m.append(b);
                 m
-            }),
+            });
+            (all, meshes)
         };
         self.triangles += mesh.triangles.len() as u64;
         self.mesh_points += mesh.positions.len() as u64;
         let header = convert::header(stamp, &self.cfg.frame_id);
-        out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_lasers(&grid, header.clone(), self.cfg.lasers))));
+        out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_lasers(&grid, header.clone(), self.cfg.lasers()))));
         if self.growing.parts > 0 {
             // The growing parts go; the scan's mesh takes their place.
             let clear = Marker { header: header.clone(), action: Marker::DELETEALL, ..Default::default() };
@@ -442,10 +449,10 @@ impl MesherNode {
         }
         // With lasers, each laser's mesh is a marker of its own, in namespace `<camera>.<laser>`.
         let id = self.scan_id as i32;
-        let markers: Vec<(Output, Msg)> = if self.cfg.laser_names.is_empty() {
+        let markers: Vec<(Output, Msg)> = if per_laser.is_empty() {
             vec![(Output::Mesh, Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header, &self.camera, id, 1.0))))]
         } else {
-            meshes
+            per_laser
                 .iter()
                 .zip(&self.cfg.laser_names)
                 .map(|(m, l)| {
@@ -527,7 +534,7 @@ impl MesherNode {
             if stamp.saturating_sub(self.last_cloud_ns) >= period {
                 self.last_cloud_ns = stamp;
                 let h = convert::header(stamp, &self.cfg.frame_id);
-                out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_lasers(&self.grid, h, self.cfg.lasers))));
+                out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_lasers(&self.grid, h, self.cfg.lasers()))));
             }
         }
         if self.cfg.mesh_period_ns.is_some_and(|period| stamp.saturating_sub(self.growing.last_ns) >= period) {
@@ -581,7 +588,7 @@ impl MesherNode {
                 xsurf_core::limits::image_side_text()
             )));
         }
-        self.samples = Some(n as usize * self.cfg.lasers.max(1));
+        self.samples = Some(n as usize * self.cfg.lasers().max(1));
         Ok(())
     }
 }

@@ -251,17 +251,26 @@ fn join_profiles(tri: &[Triangulator], lines: &[CoreLine], pose: &xsurf_core::ge
         t.triangulate(line, pose, profile);
         return;
     }
-    *profile = Profile { rgb: None, ..Profile::default() };
+    // Emptied, not replaced: its buffers serve every frame.
+    profile.points.clear();
+    profile.intensity.clear();
+    profile.range.clear();
+    profile.outside_volume = 0;
+    let mut rgb = profile.rgb.take().unwrap_or_default();
+    rgb.clear();
+    let mut colour = false;
     for (t, line) in tri.iter().zip(lines) {
         t.triangulate(line, pose, part);
         profile.points.extend_from_slice(&part.points);
         profile.intensity.extend_from_slice(&part.intensity);
         profile.range.extend_from_slice(&part.range);
         profile.outside_volume += part.outside_volume;
-        if let Some(rgb) = &part.rgb {
-            profile.rgb.get_or_insert_with(Vec::new).extend_from_slice(rgb);
+        if let Some(c) = &part.rgb {
+            rgb.extend_from_slice(c);
+            colour = true;
         }
     }
+    profile.rgb = colour.then_some(rgb);
 }
 
 impl Component for TriangulatorNode {
