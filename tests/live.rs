@@ -194,7 +194,14 @@ fn a_node_with_respawn_is_started_again() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(3000));
+    // Until the fourth life has begun (a loaded machine starts the scripts late: a fixed 3 s
+    // once saw none of them end), then a little longer for its launcher line.
+    let lives = || std::fs::read_to_string(&count).map_or(0, |t| t.lines().count());
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while lives() < 4 && std::time::Instant::now() < deadline {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
     Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
     let mut err = String::new();
     std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
