@@ -1042,6 +1042,32 @@ mod tests {
         assert!(m.handle(Input::CameraInfo(1), &Msg::CameraInfo(Arc::new(bad)), &mut out).is_err());
     }
 
+    /// A scan event of scan `scan_id` stamped at `sec`.
+    fn scan_event(scan_id: u32, event: u8, sec: i32) -> Msg {
+        let mut e = ScanEvent { scan_id, event, ..Default::default() };
+        e.header.stamp.sec = sec;
+        Msg::ScanEvent(Arc::new(e))
+    }
+
+    /// A merger without refinement in a harness, with `output_dir` if given.
+    fn merger_without_refinement(output_dir: Option<&std::path::Path>) -> xsurf_runtime::harness::Harness {
+        use xsurf_runtime::params::ParamValue;
+        let mut o = BTreeMap::new();
+        o.insert("refine".to_string(), ParamValue::Bool(false));
+        if let Some(dir) = output_dir {
+            o.insert("output_dir".to_string(), ParamValue::String(dir.to_string_lossy().into()));
+        }
+        let params = Params::resolve(&MergerParams::declarations(), &o).unwrap();
+        xsurf_runtime::harness::Harness::new(boxed(MergerNode::new(&params).unwrap()), "merger", "/")
+    }
+
+    /// A fresh output folder for a test named `tag`, and a merger without refinement writing there.
+    fn merger_writing(tag: &str) -> (xsurf_runtime::harness::Harness, std::path::PathBuf) {
+        let dir = std::env::temp_dir().join(format!("xsurf-merger-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        (merger_without_refinement(Some(&dir)), dir)
+    }
+
     /// A mesher's report on `/scan/report`: 20 frames received and `lost` lost, and its final
     /// cloud (stamp, points) if given.
     fn mesher_report(cam: &str, scan: u32, lost: u64, final_cloud: Option<(&str, u64)>) -> Msg {
@@ -1080,19 +1106,8 @@ mod tests {
     /// ones, are none of it.
     #[test]
     fn reports_before_the_scan_and_after_the_merge_reach_its_account() {
-        use xsurf_runtime::harness::Harness;
-        let dir = std::env::temp_dir().join(format!("xsurf-merger-reports-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let mut o = BTreeMap::new();
-        o.insert("refine".to_string(), xsurf_runtime::params::ParamValue::Bool(false));
-        o.insert("output_dir".to_string(), xsurf_runtime::params::ParamValue::String(dir.to_string_lossy().into()));
-        let params = Params::resolve(&MergerParams::declarations(), &o).unwrap();
-        let mut h = Harness::new(boxed(MergerNode::new(&params).unwrap()), "merger", "/");
-        let event = |event, sec| {
-            let mut e = ScanEvent { scan_id: 5, event, ..Default::default() };
-            e.header.stamp.sec = sec;
-            Msg::ScanEvent(Arc::new(e))
-        };
+        let (mut h, dir) = merger_writing("reports");
+        let event = |event, sec| scan_event(5, event, sec);
         let report = |json: serde_json::Value| Msg::Text(Arc::new(StringMsg { data: json.to_string() }));
         let mesher = |cam: &str, scan: u32, lost: u64| mesher_report(cam, scan, lost, None);
         h.feed("/scan/report", &mesher("cam1", 5, 2))
@@ -1126,20 +1141,9 @@ mod tests {
     /// (`merge_delay_s`) then merges nothing twice.
     #[test]
     fn the_merge_follows_the_last_final_cloud_without_waiting() {
-        use xsurf_runtime::harness::Harness;
-        let event = |scan_id, event, sec| {
-            let mut e = ScanEvent { scan_id, event, ..Default::default() };
-            e.header.stamp.sec = sec;
-            Msg::ScanEvent(Arc::new(e))
-        };
+        let event = scan_event;
         let mesher = |cam: &str, scan: u32, stamp: &str, points: u64| mesher_report(cam, scan, 0, Some((stamp, points)));
-        let dir = std::env::temp_dir().join(format!("xsurf-merger-final-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let mut o = BTreeMap::new();
-        o.insert("refine".to_string(), xsurf_runtime::params::ParamValue::Bool(false));
-        o.insert("output_dir".to_string(), xsurf_runtime::params::ParamValue::String(dir.to_string_lossy().into()));
-        let params = Params::resolve(&MergerParams::declarations(), &o).unwrap();
-        let mut h = Harness::new(boxed(MergerNode::new(&params).unwrap()), "merger", "/");
+        let (mut h, dir) = merger_writing("final");
         // END before the reports: the last of cam2's three messages merges.
         h.feed("/scan/events", &event(1, ScanEvent::START, 10))
             .feed("/cam1/cloud", &flat_cloud(30, 20, 0.0, 11))
@@ -1179,19 +1183,11 @@ mod tests {
     /// own.
     #[test]
     fn overlapping_cameras_merge_into_one_layer_after_the_delay() {
-        use xsurf_runtime::harness::Harness;
         let (samples, frames) = (30, 20);
         let cloud = |dz: f32, sec: i32| flat_cloud(samples, frames, dz, sec);
-        let event = |event, sec| {
-            let mut e = ScanEvent { scan_id: 3, event, ..Default::default() };
-            e.header.stamp.sec = sec;
-            Msg::ScanEvent(Arc::new(e))
-        };
+        let event = |event, sec| scan_event(3, event, sec);
         let merged_points = |dz: f32| {
-            let mut o = BTreeMap::new();
-            o.insert("refine".to_string(), xsurf_runtime::params::ParamValue::Bool(false));
-            let params = Params::resolve(&MergerParams::declarations(), &o).unwrap();
-            let mut h = Harness::new(boxed(MergerNode::new(&params).unwrap()), "merger", "/");
+            let mut h = merger_without_refinement(None);
             h.feed("/scan/events", &event(ScanEvent::START, 10))
                 .feed("/cam1/cloud", &cloud(0.0, 11))
                 .feed("/cam2/cloud", &cloud(dz, 11))
