@@ -180,6 +180,14 @@ fn node_executables_refuse_bad_input_with_exit_2() {
     assert!(String::from_utf8_lossy(&out.stdout).contains("image_raw                    sensor_msgs/msg/Image"));
     let out = xsurf(&["compose", "--help"]);
     assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("node types: camera_driver"));
+    // A node type's own help from the one binary, as its executable prints it.
+    for spec in ["merger", "/cam1/mesher", "/cam1/m=mesher"] {
+        let out = xsurf(&["compose", spec, "--help"]);
+        let node = spec.rsplit(['/', '=']).next().unwrap();
+        let exe = std::path::Path::new(env!("CARGO_BIN_EXE_xsurf")).with_file_name(node);
+        let own = run(exe.to_str().unwrap(), &["--help"], &[]);
+        assert!(out.status.success() && out.stdout == own.stdout, "{spec}: {}", String::from_utf8_lossy(&out.stdout));
+    }
     let out = xsurf(&["--version"]);
     assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), format!("xsurf {}", env!("CARGO_PKG_VERSION")));
     // A parameter the node does not have is named in a warning (before the bad value stops it).

@@ -786,10 +786,25 @@ pub fn main() -> ExitCode {
         println!("xsurf {}", env!("CARGO_PKG_VERSION"));
         return ExitCode::SUCCESS;
     }
-    // `xsurf compose --help`: how to compose, and the node types.
+    // `xsurf compose --help`: how to compose, and the node types; `xsurf compose NODE_TYPE --help`
+    // (or `/NS/NODE_TYPE`, `/NS/NAME=NODE_TYPE`): that node type's topics and parameters, as its
+    // executable's --help prints them (a node type without an executable has no other).
     if args.first().is_some_and(|a| a == "compose") && args.iter().skip(1).any(|a| a == "--help" || a == "-h") {
+        let named: Vec<&str> = args[1..]
+            .iter()
+            .filter_map(|a| {
+                let ty = a.rsplit_once('=').map_or(a.as_str(), |(_, t)| t);
+                let ty = ty.rsplit('/').next().unwrap_or(ty);
+                crate::registry::NODE_NAMES.iter().copied().find(|n| *n == ty)
+            })
+            .collect();
+        if !named.is_empty() {
+            let help: Vec<String> = named.iter().map(|n| crate::host::node_help(n)).collect();
+            write_stdout(&help.join("\n"));
+            return ExitCode::SUCCESS;
+        }
         println!(
-            "usage: xsurf compose /NS/NODE_TYPE... | /NS/NAME=NODE_TYPE... [--ros-args ...]\n  run several nodes in one process, connected in memory, every topic still on DDS\n  node types: {}\n  example: xsurf compose /cam1/edge_detector /cam1/triangulator --ros-args --params-file params.yaml\n  each node's topics and parameters: <node_type> --help (for example edge_detector --help)",
+            "usage: xsurf compose /NS/NODE_TYPE... | /NS/NAME=NODE_TYPE... [--ros-args ...]\n  run several nodes in one process, connected in memory, every topic still on DDS\n  node types: {}\n  example: xsurf compose /cam1/edge_detector /cam1/triangulator --ros-args --params-file params.yaml\n  each node's topics and parameters: xsurf compose NODE_TYPE --help (or its executable's --help)",
             crate::registry::NODE_NAMES.join(", ")
         );
         return ExitCode::SUCCESS;
