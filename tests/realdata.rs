@@ -202,6 +202,59 @@ fn robot_laser_line_is_found_in_every_frame_at_the_hand_labels() {
     }
 }
 
+/// `img` with rows and columns swapped (any encoding of whole bytes per pixel).
+fn transposed(img: &Image) -> Image {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let bpp = img.encoding.bytes_per_pixel();
+    let mut t = Image::new(img.height, img.width, img.encoding);
+    for y in 0..h {
+        for x in 0..w {
+            let (from, to) = ((y * w + x) * bpp, (x * h + y) * bpp);
+            t.data[to..to + bpp].copy_from_slice(&img.data[from..from + bpp]);
+        }
+    }
+    t
+}
+
+/// `img` (rgb8) in grey: its red channel.
+fn red_of(img: &Image) -> Image {
+    let mut g = Image::new(img.width, img.height, Encoding::Mono8);
+    for (v, p) in g.data.iter_mut().zip(img.data.chunks_exact(3)) {
+        *v = p[0];
+    }
+    g
+}
+
+/// A horizontal line is read by columns straight from the rows (each column's brightest sample
+/// found in one pass, judged on a window around it); a vertical one row by row. On the robot's
+/// real frames, grey and colour, with a region of interest, the columns give the samples of the
+/// transposed frame's rows bit for bit.
+#[test]
+fn robot_frames_by_columns_give_the_transposed_rows_exactly() {
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let roi = xsurf_core::edge::Roi { x_offset: 13, y_offset: 150, width: 401, height: 250 };
+    let swapped = xsurf_core::edge::Roi { x_offset: 150, y_offset: 13, width: 250, height: 401 };
+    let mut samples = 0;
+    for n in [2, 17, 40, 63, 86] {
+        let rgb = robot_frame(n);
+        for (img, channel) in [(rgb.clone(), Channel::RedMinusOthers), (red_of(&rgb), Channel::Red)] {
+            for (by_columns, by_rows) in [(Default::default(), Default::default()), (roi, swapped)] {
+                let cols = detect(&img, EdgeConfig { channel, roi: by_columns, ..robot_camera() });
+                let rows = detect(
+                    &transposed(&img),
+                    EdgeConfig { channel, roi: by_rows, line_orientation: Orientation::Vertical, ..robot_camera() },
+                );
+                assert!(cols.found() > 250, "frame {n} {:?} {by_columns:?}: {} samples", img.encoding, cols.found());
+                let same = (bits(&cols.u), bits(&cols.v), bits(&cols.strength), bits(&cols.width))
+                    == (bits(&rows.v), bits(&rows.u), bits(&rows.strength), bits(&rows.width));
+                assert!(same, "frame {n} {:?} {channel:?} roi {by_columns:?}", img.encoding);
+                samples += cols.found();
+            }
+        }
+    }
+    eprintln!("{samples} samples, the same bit for bit");
+}
+
 /// The Ciclop's 16 calibration views (11x6 inner corners, 13 mm squares, JPEG from a C270):
 /// the board is found in every one, and the intrinsics agree with OpenCV's
 /// (`findChessboardCorners`, `cornerSubPix`, `calibrateCamera`, run here on the same files by

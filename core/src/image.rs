@@ -154,6 +154,10 @@ impl<'a> ImageView<'a> {
     pub fn is_big_endian(&self) -> bool {
         self.big_endian
     }
+    /// The whole buffer: row `r` starts at `r * step()`.
+    pub(crate) fn data(&self) -> &'a [u8] {
+        self.data
+    }
     /// The bytes of row `r` (exactly `width * bytes_per_pixel` long). Panics never: `r` is clamped
     /// by the caller's loop bounds; an out-of-range row gives an empty slice.
     pub fn row(&self, r: u32) -> &'a [u8] {

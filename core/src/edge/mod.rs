@@ -712,7 +712,7 @@ fn judge<S: Sample>(
                 // The log-parabola (or, on a clipped top, the centre of gravity) starts a
                 // least-squares fit of the Gaussian itself, saturated samples censored.
                 let start = if saturated { cog(p) } else { gaussian_fit(p, m, bg, strength, cfg) };
-                let reach = ((0.8 * width).ceil() as usize).clamp(4, 2 * max_hw);
+                let reach = ((0.8 * width).ceil() as usize).max(4).min(2 * max_hw);
                 let (a, b) = (m.saturating_sub(reach), (m + reach).min(n - 1));
                 start.and_then(|c| {
                     let init = [f64::from(bg), f64::from(strength), f64::from(c), f64::from(width / 2.3548)];
@@ -768,6 +768,37 @@ pub struct EdgeDetector {
     plane: Plane,
 }
 
+/// Where a detection reads its signal.
+#[derive(Debug, Clone, Copy)]
+enum Signal<'a> {
+    /// The image itself: mono8 rows in place, or the float profiles of mono16 and colour.
+    Image,
+    /// Bytes, one row of the region's width per sample (a colour image's channel, for a
+    /// vertical line).
+    Plane(&'a [u8]),
+    /// Row-major bytes of a horizontal line's region, read by column (see [`Columns`]).
+    Rows(plane::Rows<'a>),
+}
+
+/// A horizontal line's signal in row-major bytes, read by column. Every column's first
+/// candidate, its brightest sample, is found in one pass over the rows in order
+/// ([`plane::column_argmax`]) and judged on the window its tests read ([`window_reach`]),
+/// gathered from the rows. Only the columns whose first candidate fails, and the searches near
+/// a run's course, read a whole column, transposed 16 columns at a time when first needed. The
+/// samples are those of the transposed image, bit for bit.
+type Columns<'a> = plane::Rows<'a>;
+
+/// How far from its peak a line's tests read, samples: the window of [`Columns`]. The flanks
+/// end `max_half_width_px + flank_px` out, the half-maximum run's crossings and the narrow
+/// line's retry `max_half_width_px + 3`, the least-squares Gaussian `2 * max_half_width_px`;
+/// one more for margin. `a_peaks_tests_read_only_its_window` holds it to that.
+fn window_reach(cfg: &EdgeConfig) -> usize {
+    let hw = cfg.max_half_width_px as usize;
+    let tests = hw + (cfg.flank_px as usize).max(3);
+    let fit = if cfg.method == Method::Gaussian { 2 * hw } else { 0 };
+    tests.max(fit) + 1
+}
+
 /// Where one detection searches: the image, its region and its signal.
 struct Search<'a, 'b> {
     image: &'a ImageView<'b>,
@@ -775,6 +806,8 @@ struct Search<'a, 'b> {
     /// The signal as bytes, one row of `inner.len()` per sample of `outer` (a transposed or
     /// colour image; `None`: mono8 rows read in place, or the float profiles of mono16).
     plane: Option<&'a [u8]>,
+    /// A horizontal line's row-major bytes (instead of `plane`).
+    columns: Option<Columns<'a>>,
     /// Samples along the line (rows of a vertical line).
     outer: std::ops::Range<u32>,
     /// Positions across the line searched (columns of a vertical line).
@@ -791,7 +824,9 @@ impl Search<'_, '_> {
     fn sample(&self, s: u32, near: Option<(f32, f32)>, buf: &mut Scratch) -> Option<Peak> {
         let enc = self.image.encoding();
         let (x0, x1) = (self.inner.start as usize, self.inner.end as usize);
-        let peak = if let Some(plane) = self.plane {
+        let peak = if let Some(c) = &self.columns {
+            self.column(c, (s - self.outer.start) as usize, near, buf)
+        } else if let Some(plane) = self.plane {
             let (n, k) = (x1 - x0, (s - self.outer.start) as usize);
             self.locate(&plane[k * n..(k + 1) * n], near, &mut buf.contrast_u8)
         } else if self.vertical && enc == Encoding::Mono8 {
@@ -805,6 +840,33 @@ impl Search<'_, '_> {
             Fit::OneEdge { edge, z } => Fit::OneEdge { edge: edge + x0 as f32, z },
         };
         Some(Peak { pos: peak.pos + x0 as f32, fit: peak.fit.map(shift), ..peak })
+    }
+
+    /// The line in column `k` of `c` (position in the region), as [`Search::locate`] finds it
+    /// in the whole column.
+    fn column(&self, c: &Columns<'_>, k: usize, near: Option<(f32, f32)>, buf: &mut Scratch) -> Option<Peak> {
+        let n = c.rows;
+        if near.is_none() && self.cfg.method != Method::Gradient {
+            // The first candidate on its window: the column's other bytes are never read.
+            let m = buf.column_at[k] as usize;
+            let reach = window_reach(self.cfg);
+            let (a, b) = (m.saturating_sub(reach), (m + reach + 1).min(n));
+            let column = c.data[c.start + a * c.stride + k..].iter().step_by(c.stride);
+            for (w, &v) in buf.window[a..b].iter_mut().zip(column) {
+                *w = v;
+            }
+            if let Ok(peak) = find_peak(&buf.window[..n], m, self.cfg, self.scale, self.saturation) {
+                return Some(peak);
+            }
+        }
+        let strip = k / 16;
+        if !buf.ready[strip] {
+            let (k0, k1) = (16 * strip, (16 * strip + 16).min(c.cols));
+            let rows = *c;
+            plane::transpose_into(n, k1 - k0, |j| &rows.row(j)[k0..], &mut buf.strips[k0 * n..k1 * n]);
+            buf.ready[strip] = true;
+        }
+        self.locate(&buf.strips[k * n..(k + 1) * n], near, &mut buf.contrast_u8)
     }
 
     fn locate<S: Sample>(&self, p: &[S], near: Option<(f32, f32)>, contrast: &mut Vec<S>) -> Option<Peak> {
@@ -865,6 +927,16 @@ struct Scratch {
     contrast_u8: Vec<u8>,
     /// Peak contrast of a float profile.
     contrast_f32: Vec<f32>,
+    /// A column's bytes near its first candidate (the rest stale), as long as the column.
+    window: Vec<u8>,
+    /// Whole columns, transposed 16 at a time where needed (see [`Columns`]).
+    strips: Vec<u8>,
+    /// Which strips of 16 columns `strips` holds for this frame.
+    ready: Vec<bool>,
+    /// The columns' running maxima (see [`Columns`]).
+    column_max: plane::ColumnMax,
+    /// Each column's first maximum (row in the region).
+    column_at: Vec<u32>,
 }
 
 /// The first maximum of `p` outside the sorted, possibly overlapping closed ranges `skip`.
@@ -910,19 +982,19 @@ impl EdgeDetector {
         let region = self.config.region(image)?;
         let vertical = self.config.line_orientation == Orientation::Vertical;
         let mut plane = std::mem::take(&mut self.plane);
-        let filled = fill_plane(image, self.config.channel, vertical, region.clone(), &mut plane);
-        let r = self.detect_in(image, region, filled.then_some(&plane.bytes[..]), out);
+        let signal = fill_plane(image, self.config.channel, vertical, region.clone(), &mut plane);
+        let r = self.detect_in(image, region, signal, out);
         self.plane = plane;
         Ok(r)
     }
 
-    /// The detection over `region` (columns, rows) of `image`, reading the signal from `plane`
-    /// where it is given (see [`Search::plane`]).
+    /// The detection over `region` (columns, rows) of `image`, reading the signal from
+    /// `signal`.
     fn detect_in(
         &mut self,
         image: &ImageView<'_>,
         (xs, ys): (std::ops::Range<u32>, std::ops::Range<u32>),
-        plane: Option<&[u8]>,
+        signal: Signal<'_>,
         out: &mut LaserLine,
     ) -> DetectStats {
         let cfg = &self.config;
@@ -932,8 +1004,22 @@ impl EdgeDetector {
         let samples = if vertical { h } else { w };
         out.reset(cfg.line_orientation, w, h, samples as usize, enc.is_color());
         let (outer, inner) = if vertical { (ys, xs) } else { (xs, ys) };
-        let search =
-            Search { image, cfg, plane, outer, inner, vertical, scale: level_scale(enc), saturation: enc.max_value() };
+        let (plane, columns) = match signal {
+            Signal::Image => (None, None),
+            Signal::Plane(p) => (Some(p), None),
+            Signal::Rows(rows) => {
+                let b = &mut self.scratch;
+                b.window.resize(rows.rows, 0);
+                b.strips.resize(rows.rows * rows.cols, 0);
+                b.ready.clear();
+                b.ready.resize(rows.cols.div_ceil(16), false);
+                b.column_at.resize(rows.cols, 0);
+                plane::column_argmax(&rows, &mut b.column_max, &mut b.column_at);
+                (None, Some(rows))
+            }
+        };
+        let scale = level_scale(enc);
+        let search = Search { image, cfg, plane, columns, outer, inner, vertical, scale, saturation: enc.max_value() };
         let mut stats = DetectStats::default();
         self.state.clear();
         self.state.resize(samples as usize, (false, None));
@@ -997,10 +1083,6 @@ pub struct LaserDetectors {
     detectors: Vec<EdgeDetector>,
     /// Every laser's signal, one plane after the other (`w * h` bytes each), row-major.
     colour: Vec<u8>,
-    /// A horizontal line's planes, transposed.
-    bytes: Vec<u8>,
-    /// One plane transposed.
-    transposed: Vec<u8>,
 }
 
 impl LaserDetectors {
@@ -1047,67 +1129,61 @@ impl LaserDetectors {
             plane::channel_rows(row, w, rgb, &channels, &mut self.colour[j * w..], plane);
         }
         let vertical = cfg.line_orientation == Orientation::Vertical;
-        if !vertical {
-            self.bytes.clear();
-            for k in 0..n {
-                let src = &self.colour[k * plane..(k + 1) * plane];
-                plane::transpose(h, w, |j| &src[j * w..], &mut self.transposed);
-                self.bytes.extend_from_slice(&self.transposed);
-            }
-        }
-        let planes = if vertical { &self.colour } else { &self.bytes };
         let mut stats = Vec::with_capacity(n);
         for (k, (d, out)) in self.detectors.iter_mut().zip(outs.iter_mut()).enumerate() {
-            stats.push(d.detect_in(image, (xs.clone(), ys.clone()), Some(&planes[k * plane..(k + 1) * plane]), out));
+            let bytes = &self.colour[k * plane..(k + 1) * plane];
+            let signal = if vertical {
+                Signal::Plane(bytes)
+            } else {
+                Signal::Rows(plane::Rows { data: bytes, start: 0, stride: w, rows: h, cols: w })
+            };
+            stats.push(d.detect_in(image, (xs.clone(), ys.clone()), signal, out));
         }
         Ok(stats)
     }
 }
 
-/// The detector's bytes of `image` in `plane` (see [`Search::plane`]) where its encoding and
-/// orientation need them: a mono8 image's columns transposed, a colour image's channel
-/// extracted (and transposed for a horizontal line). False for mono8 rows (read in place) and
-/// mono16 (read as floats).
-fn fill_plane(
-    image: &ImageView<'_>,
+/// Where the detector reads `image`'s signal, with the bytes it needs in `plane`: a colour
+/// image's channel extracted, row-major (read by rows for a vertical line, by columns for a
+/// horizontal one). A mono8 image is read in place, by rows or by columns; mono16 as floats.
+fn fill_plane<'a>(
+    image: &ImageView<'a>,
     channel: Channel,
     vertical: bool,
     (xs, ys): (std::ops::Range<u32>, std::ops::Range<u32>),
-    plane: &mut Plane,
-) -> bool {
+    plane: &'a mut Plane,
+) -> Signal<'a> {
     let (x0, w) = (xs.start as usize, xs.len());
     let (y0, h) = (ys.start as usize, ys.len());
     match image.encoding() {
-        Encoding::Mono8 if vertical => false,
+        Encoding::Mono8 if vertical => Signal::Image,
         Encoding::Mono8 => {
-            plane::transpose(h, w, |j| &image.row((y0 + j) as u32)[x0..], &mut plane.bytes);
-            true
+            let step = image.step();
+            Signal::Rows(plane::Rows { data: image.data(), start: y0 * step + x0, stride: step, rows: h, cols: w })
         }
         enc @ (Encoding::Rgb8 | Encoding::Bgr8) => {
             let rgb = enc == Encoding::Rgb8;
-            let rows = if vertical { &mut plane.bytes } else { &mut plane.colour };
             // Every byte is written below: the buffer is only sized, not cleared.
-            rows.resize(w * h, 0);
-            for (j, out) in rows.chunks_exact_mut(w.max(1)).enumerate().take(h) {
+            plane.bytes.resize(w * h, 0);
+            for (j, out) in plane.bytes.chunks_exact_mut(w.max(1)).enumerate().take(h) {
                 plane::channel_row(&image.row((y0 + j) as u32)[3 * x0..], rgb, channel, out);
             }
-            if !vertical {
-                let colour = &plane.colour;
-                plane::transpose(h, w, |j| &colour[j * w..], &mut plane.bytes);
+            let bytes = &plane.bytes[..];
+            if vertical {
+                Signal::Plane(bytes)
+            } else {
+                Signal::Rows(plane::Rows { data: bytes, start: 0, stride: w, rows: h, cols: w })
             }
-            true
         }
-        Encoding::Mono16 => false,
+        Encoding::Mono16 => Signal::Image,
     }
 }
 
-/// The detector's byte signal of a frame and the colour rows it is made from.
+/// The detector's byte signal of a frame (see [`fill_plane`]).
 #[derive(Debug, Default, Clone)]
 struct Plane {
-    /// One row per sample (see [`Search::plane`]).
+    /// A colour image's channel over the region, row-major.
     bytes: Vec<u8>,
-    /// A colour image's channel, row-major, before it is transposed.
-    colour: Vec<u8>,
 }
 
 /// Places the narrow-line samples that had one usable edge, with the mean sigma of this frame's
@@ -1276,6 +1352,49 @@ mod tests {
         }
     }
 
+    proptest::proptest! {
+        /// A peak's tests read nothing beyond `window_reach` of it: the window alone, its
+        /// outside dark or bright, gives the whole profile's answer, bit for bit, for lines
+        /// narrow and wide, beside steps, in any method and with any reach of the tests.
+        #[test]
+        fn a_peaks_tests_read_only_its_window(
+            n in 8usize..160,
+            c in 0.0f64..1.0,
+            sigma in 0.3f64..8.0,
+            amp in 0.0f64..260.0,
+            bg in 0.0f64..80.0,
+            step in (0usize..160, -60.0f64..60.0),
+            noise in proptest::collection::vec(-12i32..12, 160),
+            method in 0usize..3,
+            max_hw in 1u32..30,
+            flank in 1u32..30,
+        ) {
+            let c = c * n as f64;
+            let p: Vec<u8> = (0..n)
+                .map(|i| {
+                    let d = (i as f64 - c) / sigma;
+                    let s = if i >= step.0 { step.1 } else { 0.0 };
+                    (bg + s + amp * (-0.5 * d * d).exp() + f64::from(noise[i])).round().clamp(0.0, 255.0) as u8
+                })
+                .collect();
+            let method = [Method::CenterOfGravity, Method::Gaussian, Method::Parabolic][method];
+            let cfg = EdgeConfig { method, max_half_width_px: max_hw, flank_px: flank, ..Default::default() };
+            let m = u8::argmax(&p).unwrap();
+            let reach = window_reach(&cfg);
+            let whole = find_peak(&p, m, &cfg, 1.0, 255.0);
+            for poison in [0u8, 255] {
+                let mut w = vec![poison; n];
+                let (a, b) = (m.saturating_sub(reach), (m + reach + 1).min(n));
+                w[a..b].copy_from_slice(&p[a..b]);
+                let part = find_peak(&w, m, &cfg, 1.0, 255.0);
+                let bits = |r: &Result<Peak, (usize, usize)>| {
+                    r.as_ref().map(|k| (k.pos.to_bits(), k.width.to_bits(), k.strength.to_bits())).map_err(|_| ())
+                };
+                proptest::prop_assert_eq!(bits(&part), bits(&whole), "{:?} m {} poison {}", p, m, poison);
+            }
+        }
+    }
+
     /// Every encoding and orientation reaches the same byte path: a frame's columns (the frame
     /// transposed, its line horizontal) and its colour versions (the frame in the red channel,
     /// red first or blue first) give the mono8 rows' samples bit for bit, with and without a
@@ -1379,6 +1498,18 @@ mod tests {
                 assert!((out.strength[0] - 200.0).abs() < 15.0, "strength {}", out.strength[0]);
             }
         }
+    }
+
+    /// The narrowest reach a configuration allows, with the least-squares Gaussian: the fit's
+    /// window was clamped to at least 4 samples and at most `2 * max_half_width_px` (2 here),
+    /// which panicked.
+    #[test]
+    fn gaussian_with_the_least_half_width_does_not_panic() {
+        // Saturated, so that it is not a narrow line's pixel-integrated fit.
+        let img = line_image(64, 16, 30.3, 0.5, 400.0, 40.0);
+        let cfg = EdgeConfig { method: Method::Gaussian, max_half_width_px: 1, ..Default::default() };
+        let out = detect(&img, cfg);
+        assert!(out.found() > 0 && (out.u[0] - 30.3).abs() < 0.3, "{:?}", &out.u[..4]);
     }
 
     #[test]
@@ -1705,6 +1836,73 @@ mod tests {
                 let sd = (errs.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / n).sqrt();
                 eprintln!("fwhm {fwhm} narrow {narrow}: n {n} mean {mean:.4} sd {sd:.4}");
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod speed {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::image::Image;
+
+    /// A horizontal line read by columns against the same frame's vertical line read by rows,
+    /// with the frame in cache (the same call repeated) and out of every cache (64 MiB written
+    /// between calls), and the columns' first pass alone. The pyramid's middle frame at
+    /// 1920x1200, mono8.
+    /// `cargo test --release -p xsurf-core --lib edge::speed -- --ignored --nocapture`
+    #[test]
+    #[ignore = "a timing probe"]
+    fn columns_against_rows_in_and_out_of_cache() {
+        use crate::rig::Rig;
+        use crate::synth::{LaserModel, ScanSettings, Scanner, Scene};
+        let settings = ScanSettings { encoding: Encoding::Mono8, ..Default::default() };
+        let scene = Scene::by_name("pyramid").unwrap();
+        let s = Scanner::new(scene, Rig::study(1920, 1200), LaserModel::default(), settings).unwrap();
+        let img = s.render(0, s.frame_count() / 2);
+        let (w, h) = (img.width, img.height);
+        let mut t = Image::new(h, w, Encoding::Mono8);
+        for y in 0..h {
+            for x in 0..w {
+                t.data[(x * h + y) as usize] = img.data[(y * w + x) as usize];
+            }
+        }
+        let horizontal = EdgeConfig { line_orientation: Orientation::Horizontal, ..Default::default() };
+        let (mut by_columns, mut by_rows) =
+            (EdgeDetector::new(horizontal).unwrap(), EdgeDetector::new(EdgeConfig::default()).unwrap());
+        let mut out = LaserLine::default();
+        let (tv, v) = (t.view().unwrap(), img.view().unwrap());
+        let rows = plane::Rows { data: &t.data, start: 0, stride: h as usize, rows: w as usize, cols: h as usize };
+        let (mut max, mut at) = (plane::ColumnMax::default(), vec![0; h as usize]);
+        let mut junk = vec![1u8; 64 << 20];
+        for cold in [false, true] {
+            let mut timed = |f: &mut dyn FnMut()| {
+                let mut total = 0.0;
+                for _ in 0..200 {
+                    if cold {
+                        junk.iter_mut().step_by(64).for_each(|x| *x = x.wrapping_add(1));
+                        std::hint::black_box(&junk);
+                    }
+                    let start = std::time::Instant::now();
+                    f();
+                    total += start.elapsed().as_secs_f64();
+                }
+                total / 200.0 * 1e6
+            };
+            let c = timed(&mut || {
+                by_columns.detect(&tv, &mut out).unwrap();
+            });
+            let r = timed(&mut || {
+                by_rows.detect(&v, &mut out).unwrap();
+            });
+            let pass = timed(&mut || plane::column_argmax(&rows, &mut max, &mut at));
+            let strips = by_columns.scratch.ready.iter().filter(|&&x| x).count();
+            println!(
+                "{}: columns {c:.0} us, rows {r:.0} us ({:.0} %), first pass {pass:.0} us, {strips} of {} strips transposed",
+                if cold { "out of cache" } else { "in cache" },
+                100.0 * r / c,
+                by_columns.scratch.ready.len()
+            );
         }
     }
 }

@@ -1,9 +1,11 @@
-//! The detector's signal as one byte per pixel, one row per sample: what the byte path of the
-//! detector reads. A mono8 image with a vertical line is read in place; a horizontal line's
-//! columns are transposed once per frame in 16x16 tiles, and a colour image's channel (the
-//! laser's colour, or its colour against the others) is extracted once per frame, 32 pixels at
-//! a time. Both run in 16-byte lanes (SSE2, NEON or scalar through `wide`), so every encoding
-//! and orientation reaches the same vectorised detector as mono8 rows.
+//! The detector's signal as bytes: what the byte path of the detector reads. A mono8 image is
+//! read in place. A colour image's channel (the laser's colour, or its colour against the
+//! others) is extracted once per frame, 32 pixels at a time. A horizontal line is read by
+//! columns from row-major bytes: every column's brightest sample in one pass over the rows
+//! ([`column_argmax`]), and whole columns, where a sample needs them, transposed in tiles of 8
+//! rows by 16 columns ([`transpose_into`]). All run in 16-byte lanes (SSE2, NEON or scalar
+//! through `wide`), so every encoding and orientation reaches the same vectorised detector as
+//! mono8 rows.
 
 use super::Channel;
 use wide::u8x16;
@@ -43,11 +45,10 @@ fn shuffle6(v: &[u8x16; 6]) -> [u8x16; 6] {
 }
 
 /// The transpose of a `rows` x `cols` block of bytes whose row `j` is `row(j)` (at least `cols`
-/// bytes from its start): `dst[k * rows + j] = row(j)[k]`. Tiles of 8 rows by 16 columns in
+/// bytes from its start), into `dst` (at least `rows * cols` bytes): `dst[k * rows + j] =
+/// row(j)[k]`. Tiles of 8 rows by 16 columns in
 /// lanes (all in registers), the ragged edges one byte at a time.
-pub(super) fn transpose<'a>(rows: usize, cols: usize, row: impl Fn(usize) -> &'a [u8], dst: &mut Vec<u8>) {
-    // Every byte is written below: the buffer is only sized, not cleared.
-    dst.resize(rows * cols, 0);
+pub(super) fn transpose_into<'a>(rows: usize, cols: usize, row: impl Fn(usize) -> &'a [u8], dst: &mut [u8]) {
     let (full_rows, full_cols) = (rows / 8 * 8, cols / 16 * 16);
     // Strips of 64 rows, 16 columns at a time: each column's 64 bytes of the strip (a cache
     // line) are written whole while they are in the first-level cache, and each row's bytes are
@@ -79,6 +80,95 @@ pub(super) fn transpose<'a>(rows: usize, cols: usize, row: impl Fn(usize) -> &'a
         for (k, &b) in row(j)[..cols].iter().enumerate() {
             dst[k * rows + j] = b;
         }
+    }
+}
+
+/// Rows of bytes in a buffer: row `j` is `cols` bytes from `start + j * stride`.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Rows<'a> {
+    pub data: &'a [u8],
+    pub start: usize,
+    pub stride: usize,
+    pub rows: usize,
+    pub cols: usize,
+}
+
+impl<'a> Rows<'a> {
+    /// Row `j` (`cols` bytes).
+    #[inline(always)]
+    pub fn row(&self, j: usize) -> &'a [u8] {
+        let at = self.start + j * self.stride;
+        &self.data[at..at + self.cols]
+    }
+
+    /// The byte of row `j`, column `k`.
+    #[inline(always)]
+    pub fn at(&self, j: usize, k: usize) -> u8 {
+        self.data[self.start + j * self.stride + k]
+    }
+}
+
+/// Rows per block of [`column_argmax`]'s first pass.
+const BLOCK: usize = 16;
+
+/// The running maxima of [`column_argmax`]: each column's maximum so far, and the group of
+/// blocks where it was first reached.
+#[derive(Debug, Default, Clone)]
+pub(super) struct ColumnMax {
+    best: Vec<u8>,
+    group: Vec<u8>,
+    /// The current block's maxima.
+    block: Vec<u8>,
+}
+
+/// The first row of each column's maximum: `at[k]` is the least `j` at which `rows.at(j, k)`
+/// is the greatest of column `k` (what `Sample::argmax` gives on the column). One pass over
+/// the rows in order, 16 columns to a lane: each block of 16 rows' column maxima, and the first
+/// group of blocks that raises a column's maximum (a byte per column: at most 256 groups); then
+/// only that group's rows are read again, one byte per row, for each column.
+pub(super) fn column_argmax(rows: &Rows<'_>, scratch: &mut ColumnMax, at: &mut [u32]) {
+    let (h, w) = (rows.rows, rows.cols);
+    let full = w / 16 * 16;
+    let group_rows = BLOCK * h.div_ceil(BLOCK * 256).max(1);
+    scratch.best.clear();
+    scratch.best.resize(w, 0);
+    scratch.group.clear();
+    scratch.group.resize(w, 0);
+    scratch.block.resize(w, 0);
+    for j0 in (0..h).step_by(BLOCK) {
+        let j1 = (j0 + BLOCK).min(h);
+        let g = (j0 / group_rows) as u8;
+        // The block's maxima, four rows at a time, each row read in order.
+        scratch.block.copy_from_slice(rows.row(j0));
+        for j in (j0 + 1..j1).step_by(4) {
+            let r: [&[u8]; 4] = std::array::from_fn(|i| rows.row((j + i).min(j1 - 1)));
+            let acc = &mut scratch.block;
+            for k in (0..full).step_by(16) {
+                let m = r.iter().fold(load(&acc[k..]), |m, row| m.max(load(&row[k..])));
+                acc[k..k + 16].copy_from_slice(m.as_array());
+            }
+            for k in full..w {
+                acc[k] = r.iter().fold(acc[k], |m, row| m.max(row[k]));
+            }
+        }
+        let tag = u8x16::splat(g);
+        for k in (0..full).step_by(16) {
+            let (m, old) = (load(&scratch.block[k..]), load(&scratch.best[k..]));
+            let kept = m.saturating_sub(old).simd_eq(u8x16::ZERO);
+            scratch.best[k..k + 16].copy_from_slice(old.max(m).as_array());
+            let group = kept.bitselect(load(&scratch.group[k..]), tag);
+            scratch.group[k..k + 16].copy_from_slice(group.as_array());
+        }
+        for k in full..w {
+            if scratch.block[k] > scratch.best[k] {
+                (scratch.best[k], scratch.group[k]) = (scratch.block[k], g);
+            }
+        }
+    }
+    for (k, at) in at.iter_mut().enumerate().take(w) {
+        let a = usize::from(scratch.group[k]) * group_rows;
+        let b = (a + group_rows).min(h);
+        *at = (a..b).find(|&j| rows.at(j, k) == scratch.best[k]).unwrap_or(a) as u32;
     }
 }
 
@@ -192,11 +282,37 @@ mod tests {
         for (rows, cols) in [(16, 16), (32, 48), (17, 33), (5, 40), (40, 5), (1, 1), (0, 7), (31, 16)] {
             let stride = cols + 3;
             let src = bytes(rows * stride + 16, (rows * 100 + cols) as u64);
-            let mut dst = Vec::new();
-            transpose(rows, cols, |j| &src[j * stride..], &mut dst);
+            let mut dst = vec![0u8; rows * cols];
+            transpose_into(rows, cols, |j| &src[j * stride..], &mut dst);
             for j in 0..rows {
                 for k in 0..cols {
                     assert_eq!(dst[k * rows + j], src[j * stride + k], "{rows}x{cols} at ({j}, {k})");
+                }
+            }
+        }
+    }
+
+    /// Each column's first maximum, against a plain search down the column: random bytes,
+    /// columns of few levels (many ties), and images tall enough that a group holds several
+    /// blocks; read from rows longer than the block, at an offset.
+    #[test]
+    fn column_argmax_is_the_first_maximum() {
+        let mut scratch = ColumnMax::default();
+        for (rows, cols) in [(1, 1), (16, 16), (17, 33), (240, 320), (5000, 20), (9000, 3), (33, 100)] {
+            for levels in [256u32, 3] {
+                let stride = cols + 5;
+                let data: Vec<u8> = bytes(rows * stride + 7, (rows * cols) as u64 + u64::from(levels))
+                    .into_iter()
+                    .map(|b| (u32::from(b) % levels) as u8)
+                    .collect();
+                let r = Rows { data: &data, start: 7, stride, rows, cols };
+                let mut at = vec![u32::MAX; cols];
+                column_argmax(&r, &mut scratch, &mut at);
+                for k in 0..cols {
+                    let column: Vec<u8> = (0..rows).map(|j| r.at(j, k)).collect();
+                    let max = column.iter().copied().max().unwrap();
+                    let first = column.iter().position(|&v| v == max).unwrap();
+                    assert_eq!(at[k] as usize, first, "{rows}x{cols} levels {levels} column {k}");
                 }
             }
         }
@@ -249,11 +365,11 @@ mod speed {
     fn transpose_and_channel_rates() {
         let (w, h) = (1920usize, 1200usize);
         let src: Vec<u8> = (0..w * h * 3).map(|i| (i * 7 % 251) as u8).collect();
-        let mut dst = Vec::new();
+        let mut dst = vec![0u8; w * h];
         for (w, h) in [(w, h), (h, w), (640, 480), (480, 640)] {
             let t = std::time::Instant::now();
             for _ in 0..100 {
-                super::transpose(h, w, |j| &src[j * w..], &mut dst);
+                super::transpose_into(h, w, |j| &src[j * w..], &mut dst);
             }
             let s = t.elapsed().as_secs_f64() / 100.0;
             println!("transpose {w}x{h}: {:.0} us, {:.2} GB/s", s * 1e6, (w * h) as f64 / s * 1e-9);
