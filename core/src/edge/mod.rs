@@ -803,8 +803,9 @@ fn window_reach(cfg: &EdgeConfig) -> usize {
 struct Search<'a, 'b> {
     image: &'a ImageView<'b>,
     cfg: &'a EdgeConfig,
-    /// The signal as bytes, one row of `inner.len()` per sample of `outer` (a transposed or
-    /// colour image; `None`: mono8 rows read in place, or the float profiles of mono16).
+    /// The signal as bytes, one row of `inner.len()` per sample of `outer`: a colour image's
+    /// channel for a vertical line (`None`: mono8 rows read in place, the float profiles of
+    /// mono16, or a horizontal line's `columns`).
     plane: Option<&'a [u8]>,
     /// A horizontal line's row-major bytes (instead of `plane`).
     columns: Option<Columns<'a>>,
@@ -1287,6 +1288,19 @@ fn side_colour(image: &ImageView<'_>, u: f32, v: f32, vertical: bool, offset: f3
     [(acc[0] / n) as u8, (acc[1] / n) as u8, (acc[2] / n) as u8]
 }
 
+/// A mono8 image transposed: its rows become columns (a vertical line becomes horizontal).
+#[cfg(test)]
+fn transposed(img: &crate::image::Image) -> crate::image::Image {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let mut t = crate::image::Image::new(img.height, img.width, Encoding::Mono8);
+    for y in 0..h {
+        for x in 0..w {
+            t.data[x * h + y] = img.data[y * w + x];
+        }
+    }
+    t
+}
+
 #[cfg(test)]
 mod tests {
     use super::lanes::{walk_left, walk_right};
@@ -1407,13 +1421,7 @@ mod tests {
         let s = Scanner::new(Scene::by_name("phantom").unwrap(), Rig::study(320, 240), LaserModel::default(), settings)
             .unwrap();
         let img = s.render(0, s.frame_count() / 2);
-        let (w, h) = (img.width, img.height);
-        let mut t = Image::new(h, w, Encoding::Mono8);
-        for y in 0..h {
-            for x in 0..w {
-                t.data[(x * h + y) as usize] = img.data[(y * w + x) as usize];
-            }
-        }
+        let t = transposed(&img);
         let colour = |enc: Encoding, src: &Image| {
             let mut c = Image::new(src.width, src.height, enc);
             let r = if enc == Encoding::Rgb8 { 0 } else { 2 };
@@ -1844,7 +1852,6 @@ mod tests {
 mod speed {
     #![allow(clippy::unwrap_used)]
     use super::*;
-    use crate::image::Image;
 
     /// A horizontal line read by columns against the same frame's vertical line read by rows,
     /// with the frame in cache (the same call repeated) and out of every cache (64 MiB written
@@ -1861,12 +1868,7 @@ mod speed {
         let s = Scanner::new(scene, Rig::study(1920, 1200), LaserModel::default(), settings).unwrap();
         let img = s.render(0, s.frame_count() / 2);
         let (w, h) = (img.width, img.height);
-        let mut t = Image::new(h, w, Encoding::Mono8);
-        for y in 0..h {
-            for x in 0..w {
-                t.data[(x * h + y) as usize] = img.data[(y * w + x) as usize];
-            }
-        }
+        let t = transposed(&img);
         let horizontal = EdgeConfig { line_orientation: Orientation::Horizontal, ..Default::default() };
         let (mut by_columns, mut by_rows) =
             (EdgeDetector::new(horizontal).unwrap(), EdgeDetector::new(EdgeConfig::default()).unwrap());
