@@ -347,12 +347,14 @@ fn build_graph(topics: &BagTopics, ros: &RosArgs, opts: &Options) -> anyhow::Res
         for node in components::NODES.iter().filter(|t| t.role == components::Role::PerCamera) {
             // What the bag and the command decide, given to each node that declares it: the
             // images' transport to the image readers, the output folder to the file writers; and
-            // no growing surface for the meshers (offline nobody watches it grow).
+            // neither a growing surface nor a growing cloud from the meshers (offline nobody
+            // watches them grow, and the merger merges the scan's final cloud).
             let declared = (node.declarations)();
             let extra: Vec<(&str, ParamValue)> = [
                 ("image_transport", ParamValue::String(transport.into())),
                 ("output_dir", out_dir.clone()),
                 ("mesh_rate_hz", ParamValue::Double(0.0)),
+                ("cloud_rate_hz", ParamValue::Double(0.0)),
             ]
             .into_iter()
             .filter(|(name, _)| declared.iter().any(|d| d.name == *name))
