@@ -1,7 +1,7 @@
 //! The surface as DICOM (issue 21): a full-body merge's size (two cameras' grids of 480 samples
 //! by 390 frames, 374 400 points, about 745 000 triangles) encoded as a Surface Scan Mesh file,
 //! beside the same mesh written as binary PLY in the same run (the reference: a plain copy of
-//! the same arrays). Sending it to a PACS: `scripts/bench-pacs.sh`.
+//! the same arrays), and as the VRML scene's text. Sending it to a PACS: `scripts/bench-pacs.sh`.
 #![allow(clippy::unwrap_used, missing_docs)]
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -73,6 +73,17 @@ fn surface(c: &mut Criterion) {
         b.iter(|| {
             let mut v = Vec::with_capacity(bytes);
             xsurf_formats::ply::write(&mut v, black_box(&mesh)).unwrap();
+            v
+        })
+    });
+    g.bench_function("scene_wrl", |b| {
+        let scene = xsurf_formats::scene::Scene {
+            surfaces: vec![xsurf_formats::scene::Surface { name: "merged", mesh: &mesh, transparency: 0.3 }],
+            plane: None,
+        };
+        b.iter(|| {
+            let mut v = Vec::with_capacity(4 * bytes);
+            xsurf_formats::vrml::write(&mut v, black_box(&scene)).unwrap();
             v
         })
     });
