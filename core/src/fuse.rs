@@ -114,20 +114,17 @@ fn give_back_orphans(
     cfg: &FuseConfig,
     dropped: &mut [usize],
 ) -> usize {
-    let mut orphans: Vec<(usize, usize)> = Vec::new();
-    for (k, g) in grids.iter().enumerate() {
+    // Each grid's orphans from its own samples alone: the grids meshed on a core each.
+    let per_grid = crate::par::filter_map(grids, 1, |k, g| {
         let meshed = meshed_samples(g, &cfg.mesh);
         let (pts, orig, ns) = (g.points(), &originals[k], g.samples().max(1));
         let fused_away = |j: usize| orig[j][0].is_finite() && !pts[j][0].is_finite();
-        for i in 0..pts.len() {
-            if !pts[i][0].is_finite() || meshed[i] {
-                continue;
-            }
-            if pts[i] != orig[i] || neighbours(i, ns, pts.len()).any(fused_away) {
-                orphans.push((k, i));
-            }
-        }
-    }
+        let orphan = |i: usize| {
+            pts[i][0].is_finite() && !meshed[i] && (pts[i] != orig[i] || neighbours(i, ns, pts.len()).any(fused_away))
+        };
+        Some((0..pts.len()).filter(|&i| orphan(i)).map(|i| (k, i)).collect::<Vec<_>>())
+    });
+    let orphans: Vec<(usize, usize)> = per_grid.into_iter().flatten().collect();
     give_back(grids, originals, cfg, dropped, &orphans);
     orphans.len()
 }

@@ -43,6 +43,7 @@ pub mod image;
 pub mod limits;
 pub mod merge;
 pub mod mesh;
+pub mod par;
 pub mod pose;
 pub mod register;
 pub mod rig;

@@ -423,16 +423,13 @@ struct Icp<'a> {
 
 impl Icp<'_> {
     /// The correspondences of placement `e`.
+    /// The observations are split over the cores (each match is its observation's alone).
     fn matches(&self, e: &Iso3) -> Vec<Match> {
-        self.obs
-            .iter()
-            .enumerate()
-            .filter_map(|(i, o)| {
-                let p = o.triangulate(e, self.plane)?;
-                let j = self.reference.nearest(p, self.cfg.max_distance_m)?;
-                Some((i, j, self.reference.normals[j].dot(p - self.reference.points[j])))
-            })
-            .collect()
+        crate::par::filter_map(&self.obs, 1024, |i, o| {
+            let p = o.triangulate(e, self.plane)?;
+            let j = self.reference.nearest(p, self.cfg.max_distance_m)?;
+            Some((i, j, self.reference.normals[j].dot(p - self.reference.points[j])))
+        })
     }
     /// The `trim_fraction` of the matches with the smallest residuals.
     fn trimmed(&self, mut m: Vec<Match>) -> Vec<Match> {
@@ -625,37 +622,40 @@ pub fn refine_grid(
     motion: &ScanMotion,
     cfg: &RefineConfig,
 ) -> Result<RefineReport, RefineError> {
-    let measured =
-        grid_observations(grid.points(), grid.samples(), carm_from_optical, plane, motion, cfg.max_travel_spread_m)?;
-    // Both surfaces smoothed on their grids; the reference with normals from its grid.
+    // The reference's surface and the grid's observations side by side.
     let mesh_cfg = MeshConfig::default();
     let smooth = |g: &Grid| g.smoothed_points(cfg.smooth_iterations, mesh_cfg.smooth_lambda, mesh_cfg.max_edge_m);
-    let (ref_points, _) = smooth(reference);
-    let (points, normals) = grid_normals(&ref_points, reference.samples(), mesh_cfg.max_edge_m);
-    // Every other sample along each frame: the planes through them fit as well, and the tree
-    // builds in half the time.
-    let ns = reference.samples().max(1);
-    let (points, normals): (Vec<Vec3>, Vec<Vec3>) = points
-        .into_iter()
-        .zip(normals)
-        .enumerate()
-        .filter(|(i, _)| (i % ns).is_multiple_of(2))
-        .map(|(_, pn)| pn)
-        .unzip();
-    let surface = Reference::new(&points, &normals)?;
-    // The fit uses at most `max_points` observations, from the interior of the smoothed grid
-    // (where every point was smoothed); each point's own travel puts it on a laser plane.
-    let (smoothed, interior) = smooth(grid);
-    let step = interior.len().div_ceil(cfg.max_points.max(1)).max(1);
-    let obs: Vec<Observation> = interior
-        .iter()
-        .step_by(step)
-        .filter_map(|&i| {
-            let p = smoothed[i];
-            let v = Vec3::new(p[0].into(), p[1].into(), p[2].into());
-            Observation::from_point(v, &motion.at(motion.travel_of(v, plane)?), carm_from_optical)
-        })
-        .collect();
+    let (surface, observed) = crate::par::join(
+        || reference_surface(reference, &smooth),
+        || {
+            let measured = grid_observations(
+                grid.points(),
+                grid.samples(),
+                carm_from_optical,
+                plane,
+                motion,
+                cfg.max_travel_spread_m,
+            )?;
+            // The fit uses at most `max_points` observations, from the interior of the smoothed
+            // grid (where every point was smoothed); each point's own travel puts it on a laser
+            // plane.
+            let (smoothed, interior) = smooth(grid);
+            let step = interior.len().div_ceil(cfg.max_points.max(1)).max(1);
+            let obs: Vec<Observation> = interior
+                .iter()
+                .step_by(step)
+                .filter_map(|&i| {
+                    let p = smoothed[i];
+                    let v = Vec3::new(p[0].into(), p[1].into(), p[2].into());
+                    Observation::from_point(v, &motion.at(motion.travel_of(v, plane)?), carm_from_optical)
+                })
+                .collect();
+            Ok::<_, RefineError>((measured, obs))
+        },
+    );
+    // The errors in the order of one thread's steps: the measured points', then the reference's.
+    let (measured, obs) = observed?;
+    let surface = surface?;
     let report = refine_camera(&surface, &obs, carm_from_optical, plane, cfg)?;
     let points = grid.points_mut();
     for (i, o) in measured {
@@ -664,6 +664,26 @@ pub fn refine_grid(
             .map_or([f32::NAN; 3], |p| [p.x as f32, p.y as f32, p.z as f32]);
     }
     Ok(report)
+}
+
+/// The reference grid's surface for the fit: smoothed on its grid, with normals from it, every
+/// other sample along each frame (the planes through them fit as well, and the tree builds in
+/// half the time).
+fn reference_surface(
+    reference: &Grid,
+    smooth: &(impl Fn(&Grid) -> (Vec<[f32; 3]>, Vec<usize>) + Sync),
+) -> Result<Reference, RefineError> {
+    let (ref_points, _) = smooth(reference);
+    let (points, normals) = grid_normals(&ref_points, reference.samples(), MeshConfig::default().max_edge_m);
+    let ns = reference.samples().max(1);
+    let (points, normals): (Vec<Vec3>, Vec<Vec3>) = points
+        .into_iter()
+        .zip(normals)
+        .enumerate()
+        .filter(|(i, _)| (i % ns).is_multiple_of(2))
+        .map(|(_, pn)| pn)
+        .unzip();
+    Reference::new(&points, &normals)
 }
 
 /// Moves a grid of a camera from one placement (`from`, the one it was triangulated through)

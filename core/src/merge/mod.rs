@@ -42,8 +42,9 @@ pub struct Merged {
 /// Merges the cameras' grids (`names[k]` is grid `k`'s camera), which are fused in place.
 pub fn merge_grids(names: &[String], grids: &mut [Grid], cfg: &MergeConfig) -> Merged {
     let fused = one_surface(grids, &cfg.fuse);
+    // Each grid meshed on a core of its own.
     let mut meshes: Vec<(String, Mesh)> =
-        names.iter().cloned().zip(grids.iter()).map(|(n, g)| (n, mesh_grid(g, &cfg.mesh))).collect();
+        crate::par::filter_map(grids, 1, |i, g| names.get(i).map(|n| (n.clone(), mesh_grid(g, &cfg.mesh))));
     let mut surface = Mesh::default();
     let mut camera = Vec::new();
     for (k, (_, m)) in meshes.iter().enumerate() {
