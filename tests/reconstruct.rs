@@ -1091,3 +1091,51 @@ fn a_three_laser_scan_reconstructs_through_the_graph() {
     assert!(acc.rms_m < 0.0005 && cov > 0.95, "RMS {} m, coverage {cov}", acc.rms_m);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Offline on both cores gives one core's files, byte for byte (issue 22, item 4): the bundled
+/// phantom bag (two cameras, the refinement's fit, the fuse and the seams) reconstructed with
+/// the process held to one core (`taskset`: `available_parallelism` is then 1, and nothing is
+/// split) and with every core.
+#[test]
+fn every_core_gives_one_cores_files() {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if cores < 2 {
+        eprintln!("one core here: nothing to compare");
+        return;
+    }
+    let dir = scratch("cores");
+    let bag = root().join("bags/phantom-320x240");
+    let run = |out: &Path, one_core: bool| {
+        let mut cmd = std::process::Command::new(if one_core { "taskset" } else { env!("CARGO_BIN_EXE_xsurf") });
+        if one_core {
+            cmd.args(["-c", "0", env!("CARGO_BIN_EXE_xsurf")]);
+        }
+        let p = |p: &Path| p.to_string_lossy().into_owned();
+        let out = cmd
+            .args(["reconstruct", &p(&bag), "--params-file", &p(&bag.join("params.yaml")), "--out", &p(out), "--quiet"])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    };
+    run(&dir.join("one"), true);
+    run(&dir.join("all"), false);
+    let (mut one, mut all) = (files_under(&dir.join("one")), files_under(&dir.join("all")));
+    // The run's own account: its timings and memory differ, its counts do not.
+    let counts = |files: &mut std::collections::BTreeMap<String, Vec<u8>>| {
+        let mut r: serde_json::Value = serde_json::from_slice(&files.remove("report.json").unwrap()).unwrap();
+        for k in ["timings_s", "frames_per_second", "peak_rss_bytes"] {
+            r.as_object_mut().unwrap().remove(k);
+        }
+        for n in r["nodes"].as_array_mut().unwrap() {
+            n.as_object_mut().unwrap().remove("seconds");
+        }
+        r
+    };
+    assert_eq!(counts(&mut one), counts(&mut all));
+    assert!(one.len() >= 8, "{:?}", one.keys());
+    for (name, bytes) in &one {
+        assert!(all.get(name) == Some(bytes), "{name} differs between one core and {cores}");
+    }
+    assert_eq!(one.len(), all.len());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
