@@ -529,8 +529,14 @@ impl<'a> Replay<'a> {
             self.images += 1;
             *report.frames_read.entry(cam.trim_start_matches('/').to_string()).or_default() += 1;
         }
+        // The time reaches the message before it arrives: what was due earlier happens first,
+        // as it does live (a mesher closes a scan at END and its grace; the merger merges at its
+        // bound) and not after a message that came later (the next scan's START, which would
+        // have the merger merge the earlier scan without its final clouds).
+        let now = m.log_time_ns as i64;
+        self.router.tick(now);
         self.router.publish(&m.topic, &msg);
-        self.router.tick(m.log_time_ns as i64);
+        self.router.tick(now);
     }
 }
 

@@ -247,13 +247,27 @@ impl Router {
         }
         v
     }
-    /// Ticks every node with the graph's clock, then handles what they published.
+    /// Ticks every node with the graph's clock. The sources (nodes without inputs) first, all
+    /// their messages leaving before anything is made from them (no camera waits behind
+    /// another's chain); then the others in the order they were added, each one's output
+    /// handled before the next one ticks (what a mesher's timer closes reaches the merger
+    /// before the merger's own timer runs, as time orders them live).
     pub fn tick(&mut self, now_ns: i64) {
+        let source = |n: &Placed| n.inputs.is_empty();
         for i in 0..self.nodes.len() {
-            let out = self.nodes[i].tick(now_ns);
-            self.deliver(i, out);
+            if source(&self.nodes[i]) {
+                let out = self.nodes[i].tick(now_ns);
+                self.deliver(i, out);
+            }
         }
         self.drain();
+        for i in 0..self.nodes.len() {
+            if !source(&self.nodes[i]) {
+                let out = self.nodes[i].tick(now_ns);
+                self.deliver(i, out);
+                self.drain();
+            }
+        }
     }
     /// Tells every node, in the order they were added, that no more input is coming.
     pub fn finish(&mut self) {
@@ -351,5 +365,53 @@ mod tests {
         // A message from outside is handled, with all it causes, before publish returns.
         r.publish("/a2", &image(7));
         assert_eq!(seen.lock().unwrap().last().unwrap(), "/a3 7");
+    }
+
+    /// A node that, on a tick, publishes what it was given (a mesher closing a scan on its
+    /// timer) and notes when its own tick runs against what it was handled.
+    struct Timer {
+        input: &'static str,
+        out: &'static str,
+        held: Vec<u32>,
+        seen: Arc<Mutex<Vec<String>>>,
+    }
+    impl Component for Timer {
+        type Input = usize;
+        type Output = usize;
+        fn node_name(&self) -> &'static str {
+            "t"
+        }
+        fn inputs(&self) -> Vec<(usize, Port)> {
+            vec![(0, Port::new(self.input, Image::TYPE_NAME, QosClass::Reliable))]
+        }
+        fn outputs(&self) -> Vec<(usize, Port)> {
+            vec![(0, Port::new(self.out, Image::TYPE_NAME, QosClass::Reliable))]
+        }
+        fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
+            Ok(())
+        }
+        fn handle(&mut self, _: usize, msg: &Msg, _: &mut Outbox) -> Result<(), NodeError> {
+            self.seen.lock().unwrap().push(format!("{} got {}", self.out, tag(msg)));
+            self.held.push(tag(msg));
+            Ok(())
+        }
+        fn tick(&mut self, _: i64, out: &mut Outbox) {
+            self.seen.lock().unwrap().push(format!("{} tick", self.out));
+            for t in self.held.drain(..) {
+                out.publish(0, image(t));
+            }
+        }
+    }
+
+    #[test]
+    fn what_a_timer_publishes_reaches_later_nodes_before_their_timers() {
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let mut r = Router::new();
+        let timer = |input, out| crate::component::boxed(Timer { input, out, held: Vec::new(), seen: seen.clone() });
+        r.add(timer("/in", "/mid"), "mesher", "/", &[]);
+        r.add(timer("/mid", "/end"), "merger", "/", &[]);
+        r.publish("/in", &image(5));
+        r.tick(1);
+        assert_eq!(*seen.lock().unwrap(), ["/mid got 5", "/mid tick", "/end got 5", "/end tick"]);
     }
 }
