@@ -573,11 +573,15 @@ impl MergerNode {
             self.write_report(scan_id, report);
         }
         let plane = self.overlays.get(&scan_id);
-        for e in write_files(&dir, merged, meshes, plane, self.cfg.transparency) {
+        let span = first.filter(|_| !merged.triangles.is_empty()).map(|(_, span)| span);
+        let (errors, dicom) = write_files(&dir, merged, meshes, plane, self.cfg.transparency, |dir| {
+            span.map(|span| (span, dicom::write_scan(&self.cfg.dicom, dir, span, merged)))
+        });
+        for e in errors {
             self.write_failed(format!("cannot write files in {}: {e:#}", dir.display()));
         }
-        if let Some((_, span)) = first.filter(|_| !merged.triangles.is_empty()) {
-            self.write_dicom(&dir, span, merged);
+        if let Some((span, files)) = dicom {
+            self.queue_dicom(span, files);
         }
         if !refinement.is_empty() {
             let file = RefinementFile { scan_id, cameras: refinement.to_vec() };
@@ -585,9 +589,10 @@ impl MergerNode {
         }
     }
 
-    /// Writes the scan's DICOM files (see `dicom.rs`) and queues them for the PACS.
-    fn write_dicom(&mut self, dir: &std::path::Path, span: dicom::ScanSpan, merged: &Mesh) {
-        let files = match dicom::write_scan(&self.cfg.dicom, dir, span, merged) {
+    /// Counts the scan's DICOM files as written (see `dicom.rs`) and queues them for the PACS,
+    /// or counts their failure.
+    fn queue_dicom(&mut self, span: dicom::ScanSpan, files: Result<Vec<std::path::PathBuf>, String>) {
+        let files = match files {
             Ok(f) => f,
             Err(e) => return self.write_failed(e),
         };
@@ -715,37 +720,47 @@ fn overlay_plane(m: &Marker) -> Result<TexturedPlane, String> {
 /// Size of `preview.png`, pixels.
 const PREVIEW_SIZE: (u32, u32) = (960, 720);
 
-/// Writes the scan's surface files into `dir`; returns what could not be written, each failure
-/// naming its file (the others are written whole).
-fn write_files(
+/// Writes the scan's surface files into `dir`, and `then` the files it writes there (the
+/// DICOM); returns what could not be written, each failure naming its file (the others are
+/// written whole), in the order merged.ply, scene.wrl, scene.glb, preview.png, and `then`'s
+/// result.
+///
+/// Two at a time: the ones built whole in memory before their atomic write (scene.glb, then
+/// `then`'s) one after the other here, for their buffers not to add up (at 1920x1200, some
+/// 300 MiB more in a live merger); beside them on another core the ones written as they are
+/// made (merged.ply, scene.wrl) and the preview, a few MiB.
+fn write_files<T: Send>(
     dir: &std::path::Path,
     merged: &Mesh,
     meshes: &[(String, Mesh)],
     plane: Option<&TexturedPlane>,
     transparency: f32,
-) -> Vec<anyhow::Error> {
+    then: impl FnOnce(&std::path::Path) -> T,
+) -> (Vec<anyhow::Error>, T) {
     if let Err(e) = std::fs::create_dir_all(dir) {
-        return vec![anyhow::Error::from(e)];
+        return (vec![anyhow::Error::from(e)], then(dir));
     }
     let scene = Scene {
         surfaces: meshes.iter().map(|(name, mesh)| Surface { name, mesh, transparency }).collect(),
         plane: plane.cloned(),
     };
-    // One after the other: each is built whole in memory before its atomic write, and side by
-    // side their buffers add up (at 1920x1200, some 300 MiB more in a live merger), for 0.1 s
-    // saved offline. A file that fails does not stop the others.
     let (w, h) = PREVIEW_SIZE;
-    let results = [
-        xsurf_formats::ply::write_file(&dir.join("merged.ply"), merged).map_err(anyhow::Error::from),
-        xsurf_formats::vrml::write_file(&dir.join("scene.wrl"), &scene).map_err(anyhow::Error::from),
-        xsurf_formats::gltf::write_file(&dir.join("scene.glb"), &scene).map_err(anyhow::Error::from),
-        {
-            let rgb = xsurf_formats::preview::render_scene(merged, plane, w, h);
-            xsurf_formats::image::write_png(&dir.join("preview.png"), w, h, xsurf_formats::image::PngKind::Rgb8, &rgb)
-                .map_err(anyhow::Error::from)
+    let ((glb, after), [ply, wrl, png]) = xsurf_core::par::join(
+        || (xsurf_formats::gltf::write_file(&dir.join("scene.glb"), &scene).map_err(anyhow::Error::from), then(dir)),
+        || {
+            [
+                xsurf_formats::ply::write_file(&dir.join("merged.ply"), merged).map_err(anyhow::Error::from),
+                xsurf_formats::vrml::write_file(&dir.join("scene.wrl"), &scene).map_err(anyhow::Error::from),
+                {
+                    let rgb = xsurf_formats::preview::render_scene(merged, plane, w, h);
+                    let kind = xsurf_formats::image::PngKind::Rgb8;
+                    xsurf_formats::image::write_png(&dir.join("preview.png"), w, h, kind, &rgb)
+                        .map_err(anyhow::Error::from)
+                },
+            ]
         },
-    ];
-    results.into_iter().filter_map(Result::err).collect()
+    );
+    ([ply, wrl, glb, png].into_iter().filter_map(Result::err).collect(), after)
 }
 
 /// The merger's outputs.
