@@ -626,7 +626,7 @@ pub fn refine_grid(
     let mesh_cfg = MeshConfig::default();
     let smooth = |g: &Grid| g.smoothed_points(cfg.smooth_iterations, mesh_cfg.smooth_lambda, mesh_cfg.max_edge_m);
     let (surface, observed) = crate::par::join(
-        || reference_surface(reference, &smooth),
+        || reference_surface(reference, &smooth, mesh_cfg.max_edge_m),
         || {
             let measured = grid_observations(
                 grid.points(),
@@ -672,9 +672,10 @@ pub fn refine_grid(
 fn reference_surface(
     reference: &Grid,
     smooth: &(impl Fn(&Grid) -> (Vec<[f32; 3]>, Vec<usize>) + Sync),
+    max_edge_m: f32,
 ) -> Result<Reference, RefineError> {
     let (ref_points, _) = smooth(reference);
-    let (points, normals) = grid_normals(&ref_points, reference.samples(), MeshConfig::default().max_edge_m);
+    let (points, normals) = grid_normals(&ref_points, reference.samples(), max_edge_m);
     let ns = reference.samples().max(1);
     let (points, normals): (Vec<Vec3>, Vec<Vec3>) = points
         .into_iter()

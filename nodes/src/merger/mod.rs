@@ -727,7 +727,7 @@ const PREVIEW_SIZE: (u32, u32) = (960, 720);
 ///
 /// Two at a time: the ones built whole in memory before their atomic write (scene.glb, then
 /// `then`'s) one after the other here, for their buffers not to add up (at 1920x1200, some
-/// 300 MiB more in a live merger); beside them on another core the ones written as they are
+/// 250 MiB more in a live merger when all were side by side); beside them on another core the ones written as they are
 /// made (merged.ply, scene.wrl) and the preview, a few MiB.
 fn write_files<T: Send>(
     dir: &std::path::Path,
