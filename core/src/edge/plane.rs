@@ -218,11 +218,54 @@ fn combine1(channel: Channel, r: u8, g: u8, b: u8) -> u8 {
     }
 }
 
+/// The red, green and blue bytes (in memory order: red first only if the pixels are rgb) of
+/// the 32 3-byte pixels at the front of `src` (which holds at least 96 bytes): the first
+/// channel's 32 bytes in the first two registers, then the second's, then the third's. Five
+/// perfect shuffles, written out so that the six registers stay in registers.
+#[inline(always)]
+fn deinterleave32(src: &[u8]) -> [u8x16; 6] {
+    let v = [load(src), load(&src[16..]), load(&src[32..]), load(&src[48..]), load(&src[64..]), load(&src[80..])];
+    shuffle6(&shuffle6(&shuffle6(&shuffle6(&shuffle6(&v)))))
+}
+
+/// `f(red, green, blue)` of the first `n` 3-byte pixels of `px` into `out[..n]`: 32 pixels at a
+/// time in lanes, the rest one at a time by `f1`. Written once per channel, so that each
+/// channel's arithmetic is compiled into its own loop.
+#[inline(always)]
+fn each_pixel(
+    px: &[u8],
+    n: usize,
+    rgb: bool,
+    out: &mut [u8],
+    f: impl Fn(u8x16, u8x16, u8x16) -> u8x16,
+    f1: impl Fn(u8, u8, u8) -> u8,
+) {
+    let full = n / 32 * 32;
+    for (src, dst) in px[..3 * full].chunks_exact(96).zip(out[..full].chunks_exact_mut(32)) {
+        let v = deinterleave32(src);
+        let (lo, hi) = if rgb { (f(v[0], v[2], v[4]), f(v[1], v[3], v[5])) } else { (f(v[4], v[2], v[0]), f(v[5], v[3], v[1])) };
+        dst[..16].copy_from_slice(lo.as_array());
+        dst[16..].copy_from_slice(hi.as_array());
+    }
+    for (p, o) in px[3 * full..3 * n].chunks_exact(3).zip(&mut out[full..n]) {
+        *o = if rgb { f1(p[0], p[1], p[2]) } else { f1(p[2], p[1], p[0]) };
+    }
+}
+
 /// Channel `channel` of the 3-byte pixels of `px` (red first if `rgb`, else blue first) into
 /// `out`, one byte per pixel: 32 pixels at a time in lanes, the rest one at a time.
 pub(super) fn channel_row(px: &[u8], rgb: bool, channel: Channel, out: &mut [u8]) {
     let n = out.len().min(px.len() / 3);
-    channel_rows(px, n, rgb, &[channel], out, n);
+    let one = |r, g, b| combine1(channel, r, g, b);
+    match channel {
+        Channel::Red => each_pixel(px, n, rgb, out, |r, _, _| r, one),
+        Channel::Green => each_pixel(px, n, rgb, out, |_, g, _| g, one),
+        Channel::Blue => each_pixel(px, n, rgb, out, |_, _, b| b, one),
+        Channel::RedMinusOthers => each_pixel(px, n, rgb, out, |r, g, b| against(r, g, b), one),
+        Channel::GreenMinusOthers => each_pixel(px, n, rgb, out, |r, g, b| against(g, r, b), one),
+        Channel::BlueMinusOthers => each_pixel(px, n, rgb, out, |r, g, b| against(b, r, g), one),
+        Channel::Luma => each_pixel(px, n, rgb, out, |r, g, b| combine(Channel::Luma, r, g, b), one),
+    }
 }
 
 /// Several channels of the first `n` 3-byte pixels of `px` in one pass: channel
@@ -234,13 +277,12 @@ pub(super) fn channel_rows(px: &[u8], n: usize, rgb: bool, channels: &[Channel],
     if px.len() < 3 * n || n > stride || out.len() < last * stride + n {
         return;
     }
+    if let [channel] = channels {
+        return channel_row(&px[..3 * n], rgb, *channel, &mut out[..n]);
+    }
     let full = n / 32 * 32;
     for (i, src) in px[..3 * full].chunks_exact(96).enumerate() {
-        let v: [u8x16; 6] = std::array::from_fn(|i| load(&src[16 * i..]));
-        let mut v = v;
-        for _ in 0..5 {
-            v = shuffle6(&v);
-        }
+        let v = deinterleave32(src);
         // v[0..2]: the first channel of 32 pixels, v[2..4] the second, v[4..6] the third.
         for half in 0..2 {
             let (first, g, last) = (v[half], v[2 + half], v[4 + half]);
