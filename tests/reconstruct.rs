@@ -1144,3 +1144,48 @@ fn every_core_gives_one_cores_files() {
     assert_eq!(one.len(), all.len());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A camera hung on its side (`xsurf synth --horizontal cam2`): the bag's parameters say so for
+/// its detector and its mesher (and only for it), and the reconstruction places both cameras'
+/// points on the pyramid. A camera the rig does not have is named.
+#[test]
+fn a_camera_on_its_side_is_reconstructed_with_the_parameters_synth_writes() {
+    let dir = scratch("horizontal");
+    let bag = dir.join("bag");
+    let synth = xsurf(&[
+        "synth",
+        "pyramid",
+        "-o",
+        bag.to_str().unwrap(),
+        "--size",
+        "320x240",
+        "--speed",
+        "0.14",
+        "--horizontal",
+        "cam2",
+    ]);
+    assert!(synth.status.success(), "{}", String::from_utf8_lossy(&synth.stderr));
+    let params = std::fs::read_to_string(bag.join("params.yaml")).unwrap();
+    for node in ["edge_detector", "mesher"] {
+        assert!(
+            params.contains(&format!("/cam2/{node}:\n  ros__parameters:\n    line_orientation: horizontal\n")),
+            "{params}"
+        );
+    }
+    assert!(!params.contains("/cam1/"), "{params}");
+    let out = dir.join("out");
+    let run = reconstruct_with(&bag, &bag.join("params.yaml"), &out);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    for f in ["cam1.ply", "cam2.ply", "merged.ply"] {
+        let rms = pyramid_rms_mm(&out.join(f));
+        assert!(rms < 0.8, "{f}: rms {rms} mm");
+    }
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let (a, b) =
+        (report["frames_with_line"]["cam1"].as_u64().unwrap(), report["frames_with_line"]["cam2"].as_u64().unwrap());
+    assert!(b * 10 >= a * 9, "cam2 (on its side) had a line in {b} frames, cam1 in {a}");
+    let bad = xsurf(&["synth", "pyramid", "-o", dir.join("x").to_str().unwrap(), "--horizontal", "cam3"]);
+    assert_eq!(bad.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("--horizontal cam3: no such camera (the rig has cam1, cam2)"), "{err}");
+}

@@ -167,6 +167,9 @@ pub struct RefineConfig {
     /// and the line detector spread one measurement's error over neighbouring samples, so the
     /// normal equations' own count overstates what is known.
     pub points_per_measurement: f64,
+    /// Grid neighbours further apart than this, metres, are neither smoothed together nor
+    /// used for a normal (the meshes' `max_edge_m`: frames far apart still have neighbours).
+    pub max_edge_m: f32,
 }
 
 impl RefineConfig {
@@ -187,6 +190,7 @@ impl RefineConfig {
         min_significance: 5.0,
         min_rms_reduction: 0.25,
         points_per_measurement: 50.0,
+        max_edge_m: MeshConfig::DEFAULT.max_edge_m,
     };
 }
 
@@ -623,10 +627,10 @@ pub fn refine_grid(
     cfg: &RefineConfig,
 ) -> Result<RefineReport, RefineError> {
     // The reference's surface and the grid's observations side by side.
-    let mesh_cfg = MeshConfig::default();
-    let smooth = |g: &Grid| g.smoothed_points(cfg.smooth_iterations, mesh_cfg.smooth_lambda, mesh_cfg.max_edge_m);
+    let lambda = MeshConfig::DEFAULT.smooth_lambda;
+    let smooth = |g: &Grid| g.smoothed_points(cfg.smooth_iterations, lambda, cfg.max_edge_m);
     let (surface, observed) = crate::par::join(
-        || reference_surface(reference, &smooth, mesh_cfg.max_edge_m),
+        || reference_surface(reference, &smooth, cfg.max_edge_m),
         || {
             let measured = grid_observations(
                 grid.points(),

@@ -62,6 +62,13 @@ impl RigCamera {
         self.translation = e.translation.to_array();
         self.rotation = [q.x, q.y, q.z, q.w];
     }
+    /// The camera turned a quarter turn about its optical axis, where it hangs (its image's
+    /// rows become columns): the optical x axis turns to where y was. A camera mounted on its
+    /// side sees the laser line run along its rows (`line_orientation: horizontal`).
+    pub fn roll_quarter_turn(&mut self) {
+        let roll = Iso3::from_parts(Vec3::ZERO, Quat::from_axis_angle(Vec3::Z, std::f64::consts::FRAC_PI_2));
+        self.set_carm_from_optical(&self.carm_from_optical().compose(&roll));
+    }
     /// Intrinsics and extrinsics together.
     pub fn geometry(&self) -> Result<CameraGeometry, CameraError> {
         Ok(CameraGeometry { model: self.model()?, carm_from_optical: self.carm_from_optical() })
@@ -315,6 +322,20 @@ impl Rig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_quarter_turn_puts_the_image_x_axis_where_y_was() {
+        let mut c = Rig::study(640, 480).cameras[1].clone();
+        let before = c.carm_from_optical();
+        c.roll_quarter_turn();
+        let after = c.carm_from_optical();
+        let near = |a: Vec3, b: Vec3| (a - b).norm() < 1e-12;
+        assert!(near(after.translation, before.translation));
+        assert!(near(after.transform_vector(Vec3::X), before.transform_vector(Vec3::Y)));
+        assert!(near(after.transform_vector(Vec3::Y), -before.transform_vector(Vec3::X)));
+        assert!(near(after.transform_vector(Vec3::Z), before.transform_vector(Vec3::Z)));
+        assert_eq!(Rig { cameras: vec![c], ..Rig::study(640, 480) }.validate(), Ok(()));
+    }
 
     #[test]
     fn validation_names_the_camera_and_field() {

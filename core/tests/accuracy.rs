@@ -2,7 +2,7 @@
 //! core). Two cameras, the study's pyramid; the study's `gradient` method measured alongside.
 #![allow(clippy::unwrap_used)]
 
-use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine, Method};
+use xsurf_core::edge::{EdgeConfig, EdgeDetector, LaserLine, Method, Orientation};
 use xsurf_core::eval::{accuracy, coverage, pyramid_extents, surface_errors, Accuracy, PyramidExtents};
 use xsurf_core::geom::Vec3;
 use xsurf_core::mesh::{mesh_grid, Grid, MeshConfig};
@@ -19,7 +19,13 @@ struct Outcome {
 }
 
 fn scan(width: u32, height: u32, speed: f64, method: Method) -> Outcome {
-    let rig = Rig::study(width, height);
+    scan_with(Rig::study(width, height), speed, method)
+}
+
+/// The pyramid scanned with `rig`, each camera's detector told the orientation the scanner
+/// says its line has (as `xsurf synth` writes it into the bag's parameters).
+fn scan_with(rig: Rig, speed: f64, method: Method) -> Outcome {
+    let (width, height) = (rig.cameras[0].width, rig.cameras[0].height);
     let settings = ScanSettings { speed_mps: speed, ..Default::default() };
     let scanner =
         Scanner::new(Scene::by_name("pyramid").unwrap(), rig.clone(), LaserModel::default(), settings).unwrap();
@@ -37,8 +43,10 @@ fn scan(width: u32, height: u32, speed: f64, method: Method) -> Outcome {
     let mut triangles = 0;
     for (ci, cam) in rig.cameras.iter().enumerate() {
         let tri = Triangulator::new(cam.geometry().unwrap(), &tri_cfg).unwrap();
-        let mut det = EdgeDetector::new(EdgeConfig { method, ..Default::default() }).unwrap();
-        let mut grid = Grid::new(height as usize);
+        let line_orientation = scanner.line_orientation(ci);
+        let mut det = EdgeDetector::new(EdgeConfig { method, line_orientation, ..Default::default() }).unwrap();
+        let samples = if line_orientation == Orientation::Vertical { cam.height } else { cam.width };
+        let mut grid = Grid::new(samples as usize);
         let mut line = LaserLine::default();
         let mut prof = Profile::default();
         for f in 0..scanner.frame_count() {
@@ -113,5 +121,37 @@ fn pyramid_320x240_140mm_s_meets_the_bounds() {
     assert!(o.acc.outlier_fraction_2mm < 0.005, "outliers {}", o.acc.outlier_fraction_2mm);
     assert!(o.acc.rms_m <= 0.0010, "rms {}", o.acc.rms_m);
     assert!(o.coverage >= 0.95, "coverage {}", o.coverage);
+    check_extents(o.extents);
+}
+
+/// A camera hung on its side (cam2 turned a quarter turn about its optical axis): its line runs
+/// along the image rows, the scanner says so, and the columns' path of the detector gives the
+/// same bounds as the upright rig.
+#[test]
+fn pyramid_640x480_with_a_camera_on_its_side_meets_the_same_bounds() {
+    let mut rig = Rig::study(640, 480);
+    rig.cameras[1].roll_quarter_turn();
+    let scanner = Scanner::new(
+        Scene::by_name("pyramid").unwrap(),
+        rig.clone(),
+        LaserModel::default(),
+        ScanSettings { speed_mps: 0.070, ..Default::default() },
+    )
+    .unwrap();
+    assert_eq!(scanner.line_orientation(0), Orientation::Vertical);
+    assert_eq!(scanner.line_orientation(1), Orientation::Horizontal);
+    let upright = Scanner::new(
+        Scene::by_name("pyramid").unwrap(),
+        Rig::study(640, 480),
+        LaserModel::default(),
+        ScanSettings::default(),
+    )
+    .unwrap();
+    assert_eq!(upright.line_orientation(1), Orientation::Vertical);
+    let o = scan_with(rig, 0.070, Method::CenterOfGravity);
+    assert!(o.acc.outlier_fraction_2mm < 0.005, "outliers {}", o.acc.outlier_fraction_2mm);
+    assert!(o.acc.rms_m <= 0.0005, "rms {}", o.acc.rms_m);
+    assert!(o.coverage >= 0.95, "coverage {}", o.coverage);
+    assert!(o.triangles > 0);
     check_extents(o.extents);
 }

@@ -370,6 +370,22 @@ pub fn write_truth(dir: &Path, scanner: &Scanner) -> anyhow::Result<Vec<usize>> 
     if !scanner.rig.lasers.is_empty() {
         params.push_str(&crate::lasers::params_yaml(&scanner.rig.lasers));
     }
+    // Frames further apart than the meshes' default longest edge allows (a fast scan, or few
+    // frames): the edge that still joins neighbouring frames, for the meshers and the merger.
+    let spacing = s.speed_mps / s.fps;
+    if 2.0 * spacing > f64::from(xsurf_core::mesh::MeshConfig::DEFAULT.max_edge_m) {
+        params.push_str(&format!("    max_edge_m: {}\n", (2000.0 * spacing).ceil() / 1000.0));
+    }
+    // A camera on its side sees the line along its rows: its detector reads columns, and its
+    // mesher takes a sample per column.
+    for (ci, c) in scanner.rig.cameras.iter().enumerate() {
+        if scanner.line_orientation(ci) == xsurf_core::edge::Orientation::Horizontal {
+            for node in ["edge_detector", "mesher"] {
+                params
+                    .push_str(&format!("/{}/{node}:\n  ros__parameters:\n    line_orientation: horizontal\n", c.name));
+            }
+        }
+    }
     xsurf_formats::write_bytes_atomic(&dir.join("params.yaml"), params.as_bytes())?;
     Ok(counts)
 }

@@ -243,7 +243,8 @@ fn each_pixel(
     let full = n / 32 * 32;
     for (src, dst) in px[..3 * full].chunks_exact(96).zip(out[..full].chunks_exact_mut(32)) {
         let v = deinterleave32(src);
-        let (lo, hi) = if rgb { (f(v[0], v[2], v[4]), f(v[1], v[3], v[5])) } else { (f(v[4], v[2], v[0]), f(v[5], v[3], v[1])) };
+        let (lo, hi) =
+            if rgb { (f(v[0], v[2], v[4]), f(v[1], v[3], v[5])) } else { (f(v[4], v[2], v[0]), f(v[5], v[3], v[1])) };
         dst[..16].copy_from_slice(lo.as_array());
         dst[16..].copy_from_slice(hi.as_array());
     }
@@ -261,7 +262,7 @@ pub(super) fn channel_row(px: &[u8], rgb: bool, channel: Channel, out: &mut [u8]
         Channel::Red => each_pixel(px, n, rgb, out, |r, _, _| r, one),
         Channel::Green => each_pixel(px, n, rgb, out, |_, g, _| g, one),
         Channel::Blue => each_pixel(px, n, rgb, out, |_, _, b| b, one),
-        Channel::RedMinusOthers => each_pixel(px, n, rgb, out, |r, g, b| against(r, g, b), one),
+        Channel::RedMinusOthers => each_pixel(px, n, rgb, out, against, one),
         Channel::GreenMinusOthers => each_pixel(px, n, rgb, out, |r, g, b| against(g, r, b), one),
         Channel::BlueMinusOthers => each_pixel(px, n, rgb, out, |r, g, b| against(b, r, g), one),
         Channel::Luma => each_pixel(px, n, rgb, out, |r, g, b| combine(Channel::Luma, r, g, b), one),

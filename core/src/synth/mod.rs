@@ -7,7 +7,7 @@ pub mod scene;
 pub mod xray;
 
 use crate::camera::CameraModel;
-use crate::edge::LaserColor;
+use crate::edge::{LaserColor, Orientation};
 use crate::geom::{Iso3, Plane, Vec3};
 use crate::image::{Encoding, Image};
 use crate::pose::table_from_carm;
@@ -597,6 +597,31 @@ impl Scanner {
             }
         }
         (ambient.map(|a| a / (n * n) as f64), total)
+    }
+
+    /// Which way the laser line runs in camera `cam`'s images: `Vertical` (one sample per row)
+    /// when the points the camera observes at a quarter, half and three quarters of the scan
+    /// spread further down the image than across it, else `Horizontal` (one sample per column).
+    /// What the camera's `edge_detector` needs as `line_orientation`.
+    pub fn line_orientation(&self, cam: usize) -> Orientation {
+        let Some(c) = self.cams.get(cam) else { return Orientation::Vertical };
+        let n = self.frame_count();
+        let (mut u, mut v) = ((f64::INFINITY, f64::NEG_INFINITY), (f64::INFINITY, f64::NEG_INFINITY));
+        for index in [n / 4, n / 2, 3 * n / 4] {
+            let pose = table_from_carm(self.frame_time(index).travel_m, 0.0, 0.0);
+            let optical_from_table = pose.compose(&c.carm_from_optical).inverse();
+            for p in self.observable_points(cam, index, 0.0) {
+                if let Some((x, y)) = c.model.project(optical_from_table.transform_point(p)) {
+                    (u, v) = ((u.0.min(x), u.1.max(x)), (v.0.min(y), v.1.max(y)));
+                }
+            }
+        }
+        // No point seen: the default, as the node's.
+        if !(v.1 - v.0 < u.1 - u.0) {
+            Orientation::Vertical
+        } else {
+            Orientation::Horizontal
+        }
     }
 
     /// The points on the laser sheet that camera `cam` can observe in frame `index`, in `table`:

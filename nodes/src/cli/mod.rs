@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S] [--preset ideal|hard] [--encoding E]
-//! xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding E] [--seed N] [--preset ideal|hard] [--zstd]
+//! xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding E] [--seed N] [--preset ideal|hard] [--zstd] [--horizontal CAMS]
 //! xsurf reconstruct BAG [--params-file FILE] [--xray FILE.dcm] [--pacs AET@HOST:PORT] --out DIR
 //! xsurf pacs echo AET@HOST:PORT | send FILE|DIR AET@HOST:PORT [--ae-title T]
 //! xsurf bag info DIR
@@ -32,7 +32,7 @@ pub mod calibrate;
 const USAGE: &str = "usage:
   xsurf demo [--out DIR] [--scene NAME] [--size WxH] [--speed M_S] [--preset ideal|hard] [--encoding E]
       synthesize a scan, reconstruct it, write the files and report the accuracy (default out: ./xsurf-demo)
-  xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--preset ideal|hard] [--zstd] [--frames N] [--lasers 1|3]
+  xsurf synth SCENE -o DIR [--size WxH | --rig FILE] [--speed M_S] [--fps F] [--encoding mono8|rgb8|bgr8] [--seed N] [--preset ideal|hard] [--zstd] [--frames N] [--lasers 1|3] [--horizontal CAMS]
              [--compressed jpeg|png [--jpeg-quality Q]]
       write a synthetic scan as a rosbag2 bag plus its ground truth and radiograph (scenes: pyramid, phantom,
       sphere, cylinder, box, body); with --compressed the cameras are sensor_msgs/CompressedImage on
@@ -103,6 +103,8 @@ example: xsurf demo --out /tmp/demo --scene phantom"),
   --frames N         N frames per camera as image files instead of a bag
   --lasers N         1 (default: the collimator's plane) or 3 (and green and blue planes tilted 25
                      degrees, cameras at 45 degrees: Rig::three_lasers; needs rgb8 or bgr8)
+  --horizontal CAMS  these cameras (cam2, or cam1,cam2) hung on their side, a quarter turn about
+                     the optical axis: their line runs along the rows (params.yaml says so)
 example: xsurf synth phantom -o /tmp/phantom-bag --preset hard --zstd"),
     ("reconstruct", "options:
   BAG                a rosbag2 folder (MCAP): images or compressed images, camera_info, /tf, /tf_static
@@ -287,6 +289,16 @@ fn scanner(a: &Args, scene: &str) -> anyhow::Result<Scanner> {
             rig
         }
     };
+    let mut rig = rig;
+    for name in a.get("--horizontal").into_iter().flat_map(|l| l.split(',')) {
+        let known = rig.cameras.iter().map(|c| c.name.clone()).collect::<Vec<_>>().join(", ");
+        let cam = rig
+            .cameras
+            .iter_mut()
+            .find(|c| c.name == name)
+            .ok_or_else(|| usage(format!("--horizontal {name}: no such camera (the rig has {known})")))?;
+        cam.roll_quarter_turn();
+    }
     // Before the scanner sets up (which at 8192x8192 alone takes seconds and gigabytes).
     synth::check_memory(&rig)?;
     Ok(Scanner::new(scene, rig, preset.laser(), settings)?)
@@ -321,6 +333,7 @@ fn cmd_synth(args: &[String]) -> anyhow::Result<()> {
                 "--compressed",
                 "--jpeg-quality",
                 "--lasers",
+                "--horizontal",
             ],
             group: None,
         },

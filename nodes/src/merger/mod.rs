@@ -98,6 +98,7 @@ fn config(raw: &Params) -> Result<Config, ParamError> {
         max_translation_m: positive("refine_max_translation_m", p.refine_max_translation_m)?,
         max_rotation_deg: positive("refine_max_rotation_deg", p.refine_max_rotation_deg)?,
         max_rms_m: positive("refine_max_rms_m", p.refine_max_rms_m)?,
+        max_edge_m: p.max_edge_m,
         ..RefineConfig::default()
     };
     let (dicom, pacs) = dicom::config(&p)?;
