@@ -175,9 +175,6 @@ fn scan_event(stamp_ns: i64, event: u8) -> Msg {
     }))
 }
 
-/// Messages the bag's reader may be ahead of the graph (a 640x480 image is 300 KB).
-const READ_AHEAD: usize = 64;
-
 /// Files a reconstruction writes into its folder (besides `<cam>.ply`) and in `scan_<id>/`.
 const OUTPUT_FILES: &[&str] = &[
     "merged.ply",
@@ -468,35 +465,24 @@ impl<'a> Replay<'a> {
             })
             .sum();
         let mut progress = Progress::new(opts.progress, total_images);
-        // The bag is read and decompressed on a thread of its own, a few chunks ahead of the
-        // graph (the two are about equal work on a full-body scan); the graph takes the
-        // messages in the same file order as before, so the results are the same.
-        std::thread::scope(|scope| {
-            let (tx, rx) = std::sync::mpsc::sync_channel(READ_AHEAD);
-            scope.spawn(move || {
-                for m in bag.messages() {
-                    let failed = m.is_err();
-                    if tx.send(m).is_err() || failed {
-                        break;
-                    }
+        // The bag's chunks are read and decompressed ahead on threads of their own (see
+        // `Bag::messages`); the graph takes the messages in file order, so the results are
+        // those of one thread.
+        for m in bag.messages() {
+            let m = match m {
+                Ok(m) => m,
+                Err(e) => {
+                    log::error!("{e}; reconstructing what was read before it");
+                    report.truncated = Some(e.to_string());
+                    break;
                 }
-            });
-            for m in rx {
-                let m = match m {
-                    Ok(m) => m,
-                    Err(e) => {
-                        log::error!("{e}; reconstructing what was read before it");
-                        report.truncated = Some(e.to_string());
-                        break;
-                    }
-                };
-                report.messages_read += 1;
-                if self.takes(&m.topic) {
-                    self.feed(&m, report);
-                    progress.show(self.images);
-                }
+            };
+            report.messages_read += 1;
+            if self.takes(&m.topic) {
+                self.feed(&m, report);
+                progress.show(self.images);
             }
-        });
+        }
         if let Some(Some((_, last))) = self.implicit_span {
             self.router.publish(IMPLICIT_SCAN_TOPIC, &scan_event(last, xsurf_msgs::xsurf_msgs::ScanEvent::END));
             self.router.tick(last);

@@ -715,13 +715,13 @@ impl Bag {
     /// Every message in file order. After an error (a truncated or corrupt file) the iterator
     /// ends; the messages before it have been returned.
     pub fn messages(&self) -> BagMessages {
-        BagMessages {
-            dir: self.dir.clone(),
-            files: self.metadata.files.clone(),
-            next_file: 0,
-            current: None,
-            failed: false,
-        }
+        let files = self.metadata.files.iter().map(|f| self.dir.join(f)).collect();
+        BagMessages::new(files, xsurf_core::par::threads())
+    }
+
+    /// The same, read and decompressed on the calling thread alone.
+    pub fn messages_here(&self) -> BagMessages {
+        BagMessages::new(self.metadata.files.iter().map(|f| self.dir.join(f)).collect(), 0)
     }
 
     /// A `ros2 bag info`-style summary.
@@ -796,61 +796,8 @@ fn message_reader(
     mcap::io::MessageReader::new_with_options(Counting { inner: BufReader::new(file), count: count.clone() }, options)
 }
 
-/// The MCAP file being read: its path, the bytes read so far, the reader.
-type OpenFile =
-    (PathBuf, std::rc::Rc<std::cell::Cell<u64>>, mcap::io::MessageReader<Counting<BufReader<std::fs::File>>>);
-
-/// Iterator over a bag's messages.
-pub struct BagMessages {
-    dir: PathBuf,
-    files: Vec<String>,
-    next_file: usize,
-    current: Option<OpenFile>,
-    failed: bool,
-}
-
-impl Iterator for BagMessages {
-    type Item = Result<RawMessage, BagError>;
-    fn next(&mut self) -> Option<Self::Item> {
-        loop {
-            if self.failed {
-                return None;
-            }
-            if self.current.is_none() {
-                let f = self.files.get(self.next_file)?;
-                self.next_file += 1;
-                let path = self.dir.join(f);
-                let file = match std::fs::File::open(&path) {
-                    Ok(f) => f,
-                    Err(e) => {
-                        self.failed = true;
-                        return Some(Err(FileError::new(&path, e).into()));
-                    }
-                };
-                let count = std::rc::Rc::new(std::cell::Cell::new(0));
-                let reader = message_reader(file, &count);
-                self.current = Some((path, count, reader));
-            }
-            let (path, count, reader) = self.current.as_mut()?;
-            match reader.next() {
-                None => self.current = None,
-                Some(Ok(m)) => {
-                    return Some(Ok(RawMessage {
-                        topic: m.channel.topic.clone(),
-                        type_name: m.channel.schema.as_ref().map(|s| s.name.clone()).unwrap_or_default(),
-                        log_time_ns: m.log_time,
-                        publish_time_ns: m.publish_time,
-                        data: m.data.into_owned(),
-                    }))
-                }
-                Some(Err(e)) => {
-                    self.failed = true;
-                    return Some(Err(mcap_err(path, count.get(), e)));
-                }
-            }
-        }
-    }
-}
+mod read;
+pub use read::BagMessages;
 
 #[cfg(test)]
 mod tests {
@@ -900,16 +847,80 @@ mod tests {
         let f = std::fs::OpenOptions::new().write(true).open(&file).unwrap();
         f.set_len(len * 2 / 3).unwrap();
         let bag = Bag::open(&dir).unwrap();
-        let (mut ok, mut err) = (0, None);
-        for m in bag.messages() {
-            match m {
-                Ok(_) => ok += 1,
-                Err(e) => err = Some(e),
-            }
-        }
+        let (ok, err) = both_readers(&bag);
         let e = err.expect("truncation reported");
-        assert!(matches!(e, BagError::Mcap { offset, .. } if offset > 0), "{e}");
-        assert!(ok < 2000, "read {ok}");
+        assert!(e.contains("MCAP error at byte offset") && !e.contains("byte offset 0:"), "{e}");
+        assert!(!ok.is_empty() && ok.len() < 2000, "read {}", ok.len());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The messages of `bag` read by the threads and on this thread: the same, in the same
+    /// order, ending with the same error (if any).
+    fn both_readers(bag: &Bag) -> (Vec<RawMessage>, Option<String>) {
+        let read = |it: BagMessages| {
+            let (mut ok, mut err) = (Vec::new(), None);
+            for m in it {
+                match m {
+                    Ok(m) => ok.push(m),
+                    Err(e) => err = Some(e.to_string()),
+                }
+            }
+            (ok, err)
+        };
+        let (threads, here) = (read(bag.messages()), read(bag.messages_here()));
+        assert_eq!(threads.0.len(), here.0.len());
+        for (a, b) in threads.0.iter().zip(&here.0) {
+            assert_eq!(
+                (&a.topic, &a.type_name, a.log_time_ns, &a.data),
+                (&b.topic, &b.type_name, b.log_time_ns, &b.data)
+            );
+        }
+        assert_eq!(threads.1, here.1);
+        threads
+    }
+
+    #[test]
+    fn chunks_decompressed_ahead_give_one_threads_messages_and_errors() {
+        let dir = tmp("ahead");
+        let mut w = BagWriter::create(&dir, BagOptions { zstd: true }).unwrap();
+        w.add_topic("/a", "std_msgs/msg/String", "string data\n", &Qos::RELIABLE).unwrap();
+        w.add_topic("/b", "std_msgs/msg/String", "string data\n", &Qos::RELIABLE).unwrap();
+        // Messages of 100 kB: many chunks, each compressed.
+        for i in 0..200u64 {
+            let data: Vec<u8> = (0..100_000u64).map(|k| ((k * (i + 1)) % 251) as u8).collect();
+            w.write(if i % 3 == 0 { "/b" } else { "/a" }, i, i, &data).unwrap();
+        }
+        let meta = w.finish().unwrap();
+        let bag = Bag::open(&dir).unwrap();
+        let (msgs, err) = both_readers(&bag);
+        assert_eq!((msgs.len(), err), (200, None));
+        assert!(msgs.iter().enumerate().all(|(i, m)| m.log_time_ns == i as u64 && m.data[1] == ((i + 1) % 251) as u8));
+        // A damaged byte in the middle of the file: a chunk fails its decompression or its CRC;
+        // the messages before it are read, the error names the file and an offset.
+        let file = dir.join(&meta.files[0]);
+        let mut bytes = std::fs::read(&file).unwrap();
+        let at = bytes.len() / 2;
+        bytes[at] ^= 0x5a;
+        bytes[at + 1] ^= 0xa5;
+        std::fs::write(&file, &bytes).unwrap();
+        let (msgs, err) = both_readers(&bag);
+        let err = err.expect("the damage is reported");
+        assert!(err.contains(&meta.files[0]) && err.contains("byte offset"), "{err}");
+        assert!(msgs.len() > 50 && msgs.len() < 200, "{} messages before the damage", msgs.len());
+        // A chunk claiming more than a record may hold is refused, not allocated: the first
+        // chunk's uncompressed size (its body's third field) made 2^62.
+        bytes[at] ^= 0x5a;
+        bytes[at + 1] ^= 0xa5;
+        let mut pos = 8;
+        while bytes[pos] != 0x06 {
+            pos += 9 + u64::from_le_bytes(bytes[pos + 1..pos + 9].try_into().unwrap()) as usize;
+        }
+        bytes[pos + 9 + 16..pos + 9 + 24].copy_from_slice(&(1u64 << 62).to_le_bytes());
+        std::fs::write(&file, &bytes).unwrap();
+        let (msgs, err) = both_readers(&bag);
+        let err = err.expect("the size is refused");
+        assert!(err.contains("a chunk says it holds 4611686018427387904 bytes"), "{err}");
+        assert!(msgs.is_empty());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
