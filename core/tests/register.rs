@@ -165,3 +165,58 @@ fn perturbed_second_camera_is_recovered_and_the_merge_is_as_good_as_calibrated()
         RefineError::TooLittleOverlap { .. } | RefineError::MovedTooFar { .. } | RefineError::PoorFit { .. }
     ));
 }
+
+mod common;
+
+/// The refinement on the `hard` preset's scans (issue 17), each camera's grid as the mesher
+/// hands it to the merger (its contradicted points rejected): where the true calibration is
+/// left (the floor: within 0.5 mm / 0.05 degrees, or refused), and where cam2, off by 2 mm /
+/// 0.3 degrees, is put. A report, not a test: the floor is not met on every scan (run with
+/// `--ignored --nocapture`; BENCHMARKS.md quotes it).
+#[test]
+#[ignore]
+fn refinement_on_hard_scans() {
+    use xsurf_core::image::Encoding;
+    use xsurf_core::mesh::MeshConfig;
+    use xsurf_core::synth::Preset;
+    let mesh = MeshConfig::default();
+    for (scene, (w, h), encoding) in [
+        ("pyramid", (640, 480), Encoding::Mono8),
+        ("phantom", (640, 480), Encoding::Mono8),
+        ("pyramid", (320, 240), Encoding::Mono8),
+        ("phantom", (320, 240), Encoding::Rgb8),
+    ] {
+        let rig = Rig::study(w, h);
+        let mut settings = ScanSettings { speed_mps: 0.07, encoding, ..Default::default() };
+        Preset::Hard.apply(&mut settings);
+        let scanner =
+            Scanner::new(Scene::by_name(scene).unwrap(), rig.clone(), Preset::Hard.laser(), settings).unwrap();
+        let plane = Plane::from_params(rig.laser_plane).unwrap();
+        let motion = ScanMotion { table_from_carm: scanner.pose_at(0.0) };
+        let e2 = rig.cameras[1].carm_from_optical();
+        let grids = |used: &Rig| {
+            let mut g = common::camera_grids(&scanner, used);
+            for g in &mut g {
+                g.reject_contradicted(mesh.outlier_tolerance_m, mesh.max_edge_m);
+            }
+            g
+        };
+        let what = format!("{scene} {w}x{h} {encoding:?}");
+        let g = grids(&rig);
+        let outcome = |r: Result<xsurf_core::register::RefineReport, RefineError>| match r {
+            Ok(r) => {
+                let (dt, dr) = placement_error(&e2, &r.carm_from_optical);
+                format!("moved to {dt:.3} mm / {dr:.4} deg of the truth")
+            }
+            Err(e) => format!("refused ({e})"),
+        };
+        let r = refine_grid(&g[0], &mut g[1].clone(), &e2, &plane, &motion, &RefineConfig::default());
+        eprintln!("{what}, the true calibration: {}", outcome(r));
+        let bad = perturb(&e2, 2.0, 0.3);
+        let mut stale = rig.clone();
+        stale.cameras[1].set_carm_from_optical(&bad);
+        let mut g2 = grids(&stale).swap_remove(1);
+        let r = refine_grid(&g[0], &mut g2, &bad, &plane, &motion, &RefineConfig::default());
+        eprintln!("{what}, cam2 off by 2 mm / 0.3 deg: {}", outcome(r));
+    }
+}
