@@ -170,7 +170,16 @@ pub struct RefineConfig {
     /// Grid neighbours further apart than this, metres, are neither smoothed together nor
     /// used for a normal (the meshes' `max_edge_m`: frames far apart still have neighbours).
     pub max_edge_m: f32,
+    /// A direction of the placement that the data hold no better than this (one standard
+    /// deviation along an eigen-direction of the normal equations, rotations taken at
+    /// [`LEVER_M`]), metres, is left as calibrated: the fit would slide along it on the
+    /// smallest bias between the cameras' surfaces, barely changing either.
+    pub max_sigma_m: f64,
 }
+
+/// The distance at which a rotation of the camera is compared with its shifts: a radian at a
+/// metre (about where the scene is) as a metre.
+pub const LEVER_M: f64 = 1.0;
 
 impl RefineConfig {
     /// The defaults (the merger's parameter defaults), usable in constant expressions.
@@ -191,6 +200,7 @@ impl RefineConfig {
         min_rms_reduction: 0.25,
         points_per_measurement: 50.0,
         max_edge_m: MeshConfig::DEFAULT.max_edge_m,
+        max_sigma_m: 0.003,
     };
 }
 
@@ -470,8 +480,10 @@ impl Icp<'_> {
             if m.len() < self.cfg.min_overlap_points {
                 break;
             }
-            let (ata, atb) = self.normal_equations(&self.trimmed(m), &e);
-            let x = solve6(ata, atb).ok_or(RefineError::Degenerate)?;
+            let m = self.trimmed(m);
+            let (ata, atb) = self.normal_equations(&m, &e);
+            let s2 = Icp::rms(&m).powi(2) * self.cfg.points_per_measurement;
+            let x = held_step(&ata, &atb, s2, self.cfg.max_sigma_m).ok_or(RefineError::Degenerate)?;
             e = corrected(&e, &x);
             if Vec3::new(x[0], x[1], x[2]).norm() < 1e-6 && Vec3::new(x[3], x[4], x[5]).norm() < 1e-6 {
                 break;
@@ -479,6 +491,30 @@ impl Icp<'_> {
         }
         Ok((e, iterations))
     }
+}
+
+/// The Gauss-Newton step `ata x = atb` in the directions the data hold: along each
+/// eigen-direction of the normal equations (rotations scaled by [`LEVER_M`]) whose standard
+/// deviation, `sqrt(s2 / eigenvalue)`, is at most `max_sigma_m`; nothing along the others.
+/// `None` where no direction is held.
+fn held_step(ata: &[[f64; 6]; 6], atb: &[f64; 6], s2: f64, max_sigma_m: f64) -> Option<[f64; 6]> {
+    let scale = |k: usize| if k < 3 { 1.0 / LEVER_M } else { 1.0 };
+    let a: Vec<f64> = (0..36).map(|i| ata[i / 6][i % 6] * scale(i / 6) * scale(i % 6)).collect();
+    let b: Vec<f64> = (0..6).map(|k| atb[k] * scale(k)).collect();
+    let (values, vectors) = crate::calib::linalg::sym_eigen(&a, 6);
+    let mut x = [0.0; 6];
+    let mut held = 0;
+    for (l, v) in values.iter().zip(&vectors) {
+        if !(*l > 0.0 && s2 / l <= max_sigma_m * max_sigma_m) {
+            continue;
+        }
+        held += 1;
+        let along = (0..6).map(|k| v[k] * b[k]).sum::<f64>() / l;
+        for k in 0..6 {
+            x[k] += along * v[k] * scale(k);
+        }
+    }
+    (held > 0).then_some(x)
 }
 
 /// The variances of the six correction parameters: the diagonal of `s2 (ata)^-1`.
