@@ -26,8 +26,8 @@ const AHEAD: usize = 8;
 enum Piece {
     /// A storage file begins: its channel and schema ids are its own.
     File(PathBuf),
-    /// A schema, channel or message record outside chunks.
-    Record(Record<'static>),
+    /// A schema, channel or message record outside chunks, and the file's bytes read up to it.
+    Record(Record<'static>, u64),
     /// A chunk as stored.
     Chunk(Chunk),
     /// The file cannot be read further: the bag's messages end here.
@@ -45,11 +45,27 @@ struct Chunk {
     limit: u64,
 }
 
-/// A piece as the caller takes it: records ready, or a chunk's records still being made.
+/// A piece as the caller takes it: records ready, or a chunk's records still being made; each
+/// with the file's bytes read up to it.
 enum Ready {
     File(PathBuf),
-    Records(Result<Vec<Record<'static>>, BagError>),
-    Pending(Receiver<Result<Vec<Record<'static>>, BagError>>),
+    Records(Result<Vec<Record<'static>>, BagError>, u64),
+    Pending(Receiver<Result<Vec<Record<'static>>, BagError>>, u64),
+}
+
+impl Ready {
+    /// A piece read on this thread, its chunk (if it is one) decompressed here.
+    fn here(piece: Piece) -> Ready {
+        match piece {
+            Piece::File(path) => Ready::File(path),
+            Piece::Record(r, at) => Ready::Records(Ok(vec![r]), at),
+            Piece::Chunk(c) => {
+                let at = c.offset;
+                Ready::Records(unpack(c), at)
+            }
+            Piece::Failed(e) => Ready::Records(Err(e), 0),
+        }
+    }
 }
 
 /// Reads one storage file after the other into [`Piece`]s.
@@ -137,7 +153,8 @@ impl Scan {
                     }
                     // A chunk cut short (a recording that did not finish) still holds the
                     // messages written before the cut.
-                    self.salvaged = salvage(&self.path, self.next_record, self.limit).map(Piece::Record).collect();
+                    let at = self.next_record;
+                    self.salvaged = salvage(&self.path, at, self.limit).map(|r| Piece::Record(r, at)).collect();
                     self.salvaged.push_back(Piece::Failed(failed));
                     return self.salvaged.pop_front();
                 }
@@ -171,7 +188,7 @@ impl Scan {
                         return Some(Piece::Chunk(Chunk { path, body, offset, limit }));
                     }
                     Ok(r @ (Record::Schema { .. } | Record::Channel(_) | Record::Message { .. })) => {
-                        return Some(Piece::Record(r.into_owned()))
+                        return Some(Piece::Record(r.into_owned(), self.read))
                     }
                     Ok(_) => {}
                     Err(e) => return Some(Piece::Failed(mcap_err(&self.path, self.read, e))),
@@ -269,6 +286,8 @@ pub struct BagMessages {
     channels: ChannelAccumulator<'static>,
     /// Records of the current piece not yet looked at.
     records: VecDeque<Record<'static>>,
+    /// The file's bytes read up to the current piece (for its errors).
+    at: u64,
     failed: bool,
 }
 
@@ -282,6 +301,7 @@ impl BagMessages {
             path: PathBuf::new(),
             channels: ChannelAccumulator::default(),
             records: VecDeque::new(),
+            at: 0,
             failed: false,
         }
     }
@@ -290,12 +310,7 @@ impl BagMessages {
     fn next_records(&mut self) -> Option<Result<Vec<Record<'static>>, BagError>> {
         let ready = match &mut self.source {
             Source::Threads(rx) => rx.recv().ok()?,
-            Source::Here(storage) => match storage.next_piece()? {
-                Piece::File(path) => Ready::File(path),
-                Piece::Record(r) => Ready::Records(Ok(vec![r])),
-                Piece::Chunk(c) => Ready::Records(unpack(c)),
-                Piece::Failed(e) => Ready::Records(Err(e)),
-            },
+            Source::Here(storage) => Ready::here(storage.next_piece()?),
         };
         match ready {
             Ready::File(path) => {
@@ -303,17 +318,23 @@ impl BagMessages {
                 self.channels = ChannelAccumulator::default();
                 Some(Ok(Vec::new()))
             }
-            Ready::Records(r) => Some(r),
+            Ready::Records(r, at) => {
+                self.at = at;
+                Some(r)
+            }
             // A worker that has gone without an answer (it panicked) ends the bag there.
-            Ready::Pending(rx) => Some(rx.recv().unwrap_or_else(|_| {
-                Err(mcap_err(&self.path, 0, "the thread decompressing a chunk stopped without a result"))
-            })),
+            Ready::Pending(rx, at) => {
+                self.at = at;
+                Some(rx.recv().unwrap_or_else(|_| {
+                    Err(mcap_err(&self.path, at, "the thread decompressing a chunk stopped without a result"))
+                }))
+            }
         }
     }
 
     /// The message of record `r`, if it is one; schemas and channels are taken in.
     fn message(&mut self, r: Record<'static>) -> Result<Option<RawMessage>, BagError> {
-        let bad = |e: mcap::McapError| mcap_err(&self.path, 0, e);
+        let bad = |e: mcap::McapError| mcap_err(&self.path, self.at, e);
         match r {
             Record::Schema { header, data } => self.channels.add_schema(header, data).map_err(bad).map(|()| None),
             Record::Channel(c) => self.channels.add_channel(c).map_err(bad).map(|()| None),
@@ -389,17 +410,15 @@ fn start(storage: Storage, workers: usize) -> Source {
         let Some(mut storage) = theirs.lock().unwrap_or_else(PoisonError::into_inner).take() else { return };
         while let Some(piece) = storage.next_piece() {
             let ready = match piece {
-                Piece::File(p) => Ready::File(p),
-                Piece::Record(r) => Ready::Records(Ok(vec![r])),
                 Piece::Chunk(c) if started > 0 => {
                     let (done_tx, done_rx) = channel();
+                    let at = c.offset;
                     if jobs_tx.send((c, done_tx)).is_err() {
                         return;
                     }
-                    Ready::Pending(done_rx)
+                    Ready::Pending(done_rx, at)
                 }
-                Piece::Chunk(c) => Ready::Records(unpack(c)),
-                Piece::Failed(e) => Ready::Records(Err(e)),
+                piece => Ready::here(piece),
             };
             if tx.send(ready).is_err() {
                 return;
