@@ -443,6 +443,12 @@ fn a_miscalibrated_camera_is_refined_and_saved_to_the_rig_file() {
     assert!(refined < 1.1 * calibrated, "refined {refined} mm vs calibrated {calibrated} mm");
     assert_eq!(counters["refinements"], 1, "{counters}");
     assert_eq!(counters["refinements_refused"], 0, "{counters}");
+    // The record says how many of the placement's six directions the data held.
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("refined").join("refinement.json")).unwrap()).unwrap();
+    let held = record["cameras"][0]["held_directions"].as_u64().unwrap();
+    assert!((1..=6).contains(&held), "{record}");
+    assert!(record["cameras"][0]["reason"].as_str().unwrap().contains(&format!("{held} of 6 directions held")));
     // The saved rig: cam2 refined, cam1 and the laser untouched. At this bag's 320x240 and
     // 4.7 mm between frames the surface pins the rays in the working region better than the
     // camera's centre (a shift and a turn nearly cancel): 0.7 mm / 0.04 deg from the truth when

@@ -235,6 +235,9 @@ pub struct RefineReport {
     pub sigma_translation_m: f64,
     /// One standard deviation of the orientation correction, degrees.
     pub sigma_rotation_deg: f64,
+    /// Of the six directions of the placement, those the data held in the last step (see
+    /// [`RefineConfig::max_sigma_m`]); along the others the camera stayed as calibrated.
+    pub held_directions: u32,
 }
 
 /// Why the calibrated placement stands.
@@ -471,9 +474,10 @@ impl Icp<'_> {
     }
     /// Gauss-Newton from `start` until a step moves no ray by more than a micrometre at a
     /// metre, or `max_iterations`; the placement and the iterations taken.
-    fn solve(&self, start: &Iso3) -> Result<(Iso3, u32), RefineError> {
+    /// Also the directions held in the last step.
+    fn solve(&self, start: &Iso3) -> Result<(Iso3, u32, u32), RefineError> {
         let mut e = *start;
-        let mut iterations = 0;
+        let (mut iterations, mut held) = (0, 0);
         for it in 0..self.cfg.max_iterations {
             iterations = it + 1;
             let m = self.matches(&e);
@@ -483,21 +487,22 @@ impl Icp<'_> {
             let m = self.trimmed(m);
             let (ata, atb) = self.normal_equations(&m, &e);
             let s2 = Icp::rms(&m).powi(2) * self.cfg.points_per_measurement;
-            let x = held_step(&ata, &atb, s2, self.cfg.max_sigma_m).ok_or(RefineError::Degenerate)?;
+            let x;
+            (x, held) = held_step(&ata, &atb, s2, self.cfg.max_sigma_m).ok_or(RefineError::Degenerate)?;
             e = corrected(&e, &x);
             if Vec3::new(x[0], x[1], x[2]).norm() < 1e-6 && Vec3::new(x[3], x[4], x[5]).norm() < 1e-6 {
                 break;
             }
         }
-        Ok((e, iterations))
+        Ok((e, iterations, held))
     }
 }
 
 /// The Gauss-Newton step `ata x = atb` in the directions the data hold: along each
 /// eigen-direction of the normal equations (rotations scaled by [`LEVER_M`]) whose standard
 /// deviation, `sqrt(s2 / eigenvalue)`, is at most `max_sigma_m`; nothing along the others.
-/// `None` where no direction is held.
-fn held_step(ata: &[[f64; 6]; 6], atb: &[f64; 6], s2: f64, max_sigma_m: f64) -> Option<[f64; 6]> {
+/// Also how many directions are held; `None` where none is.
+fn held_step(ata: &[[f64; 6]; 6], atb: &[f64; 6], s2: f64, max_sigma_m: f64) -> Option<([f64; 6], u32)> {
     let scale = |k: usize| if k < 3 { 1.0 / LEVER_M } else { 1.0 };
     let a: Vec<f64> = (0..36).map(|i| ata[i / 6][i % 6] * scale(i / 6) * scale(i % 6)).collect();
     let b: Vec<f64> = (0..6).map(|k| atb[k] * scale(k)).collect();
@@ -514,7 +519,7 @@ fn held_step(ata: &[[f64; 6]; 6], atb: &[f64; 6], s2: f64, max_sigma_m: f64) -> 
             x[k] += along * v[k] * scale(k);
         }
     }
-    (held > 0).then_some(x)
+    (held > 0).then_some((x, held))
 }
 
 /// The variances of the six correction parameters: the diagonal of `s2 (ata)^-1`.
@@ -566,7 +571,7 @@ pub fn refine_camera(
         });
     }
     let rms_before = Icp::rms(&icp.trimmed(first));
-    let (e, iterations) = icp.solve(carm_from_optical)?;
+    let (e, iterations, held_directions) = icp.solve(carm_from_optical)?;
     let all = icp.matches(&e);
     let overlap_fraction = all.len() as f64 / points.max(1) as f64;
     let overlap = all.len();
@@ -620,6 +625,7 @@ pub fn refine_camera(
         significance,
         sigma_translation_m,
         sigma_rotation_deg,
+        held_directions,
     })
 }
 

@@ -83,6 +83,10 @@ pub struct Record {
     /// Correction of the camera's position in `carm`, metres (refined only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub correction_m: Option<[f64; 3]>,
+    /// Of the placement's six directions (rotations taken at 1 m), those the data held; along
+    /// the others the camera stayed as calibrated (refined only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_directions: Option<u32>,
     /// Iterations run (refined only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub iterations: Option<u32>,
@@ -136,6 +140,7 @@ impl Record {
             camera: camera.into(),
             correction_deg: None,
             correction_m: None,
+            held_directions: None,
             iterations: None,
             overlap_fraction: None,
             points: None,
@@ -157,12 +162,14 @@ impl Record {
             calibrated: Some(calibrated.into()),
             correction_deg: Some(r.rotation_deg),
             correction_m: Some([t.x, t.y, t.z]),
+            held_directions: Some(r.held_directions),
             iterations: Some(r.iterations),
             overlap_fraction: Some(r.overlap_fraction),
             points: Some(r.points),
             reason: format!(
-                "the correction is {:.0} standard deviations and lowers the RMS residual from {:.5} to {:.5} m",
-                r.significance, r.rms_before_m, r.rms_after_m
+                "the correction is {:.0} standard deviations and lowers the RMS residual from {:.5} to {:.5} m; \
+                 {} of 6 directions held by the data (the others left as calibrated)",
+                r.significance, r.rms_before_m, r.rms_after_m, r.held_directions
             ),
             refined: Some((&r.carm_from_optical).into()),
             rms_after_m: Some(r.rms_after_m),

@@ -685,10 +685,12 @@ impl MergerNode {
 fn log_refinement(scan: u32, name: &str, reference: &str, r: &RefineReport) {
     log::info!(
         "merger: scan {scan}: {name} refined against {reference}: moved {:.2} mm / {:.3} deg ({:.0} standard \
-         deviations), {} iterations, RMS {:.3} -> {:.3} mm over {} points, overlap {:.0} %",
+         deviations; {} of 6 directions held by the data), {} iterations, RMS {:.3} -> {:.3} mm over {} points, \
+         overlap {:.0} %",
         r.translation_m.norm() * 1e3,
         r.rotation_deg,
         r.significance,
+        r.held_directions,
         r.iterations,
         r.rms_before_m * 1e3,
         r.rms_after_m * 1e3,
