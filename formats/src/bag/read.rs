@@ -163,17 +163,10 @@ impl Scan {
                 self.next_record += 9 + data.len() as u64;
             }
             match event {
-                LinearReadEvent::ReadRequest(need) => {
-                    let n = loop {
-                        match self.file.read(self.reader.insert(need)) {
-                            Ok(n) => break n,
-                            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                            Err(e) => return Some(Piece::Failed(FileError::new(&self.path, e).into())),
-                        }
-                    };
-                    self.reader.notify_read(n);
-                    self.read += n as u64;
-                }
+                LinearReadEvent::ReadRequest(need) => match fill(&mut self.reader, need, &mut self.file) {
+                    Ok(n) => self.read += n as u64,
+                    Err(e) => return Some(Piece::Failed(FileError::new(&self.path, e).into())),
+                },
                 LinearReadEvent::Record { opcode: op::DATA_END, .. } => self.past_data_end = true,
                 LinearReadEvent::Record { .. } if self.past_data_end => {}
                 LinearReadEvent::Record { opcode, data } => match mcap::parse_record(opcode, data) {
@@ -187,10 +180,11 @@ impl Scan {
                         let (path, body, offset, limit) = (self.path.clone(), data.to_vec(), self.read, self.limit);
                         return Some(Piece::Chunk(Chunk { path, body, offset, limit }));
                     }
-                    Ok(r @ (Record::Schema { .. } | Record::Channel(_) | Record::Message { .. })) => {
-                        return Some(Piece::Record(r.into_owned(), self.read))
+                    Ok(r) => {
+                        if let Some(r) = message_part(r) {
+                            return Some(Piece::Record(r, self.read));
+                        }
                     }
-                    Ok(_) => {}
                     Err(e) => return Some(Piece::Failed(mcap_err(&self.path, self.read, e))),
                 },
             }
@@ -214,16 +208,13 @@ fn salvage(path: &std::path::Path, from: u64, limit: u64) -> impl Iterator<Item 
         let f = file.as_mut()?;
         match reader.next_event()? {
             Ok(LinearReadEvent::ReadRequest(need)) => {
-                let n = f.read(reader.insert(need)).ok()?;
-                reader.notify_read(n);
+                fill(&mut reader, need, f).ok()?;
             }
-            Ok(LinearReadEvent::Record { opcode, data }) => match mcap::parse_record(opcode, data) {
-                Ok(r @ (Record::Schema { .. } | Record::Channel(_) | Record::Message { .. })) => {
-                    return Some(r.into_owned())
+            Ok(LinearReadEvent::Record { opcode, data }) => {
+                if let Some(r) = message_part(mcap::parse_record(opcode, data).ok()?) {
+                    return Some(r);
                 }
-                Ok(_) => {}
-                Err(_) => return None,
-            },
+            }
             Err(_) => return None,
         }
     })
@@ -241,30 +232,38 @@ fn unpack(c: Chunk) -> Result<Vec<Record<'static>>, BagError> {
     let mut head = [0u8; 9];
     head[0] = op::CHUNK;
     head[1..].copy_from_slice(&(c.body.len() as u64).to_le_bytes());
-    let (mut head, mut body) = (&head[..], &c.body[..]);
+    let mut record = head.as_slice().chain(c.body.as_slice());
     let mut records = Vec::new();
     while let Some(event) = reader.next_event() {
         let bad = |e: mcap::McapError| mcap_err(&c.path, c.offset, format!("in the chunk ending here: {e}"));
         match event.map_err(bad)? {
             LinearReadEvent::ReadRequest(need) => {
-                let buf = reader.insert(need);
-                let from_head = head.len().min(buf.len());
-                buf[..from_head].copy_from_slice(&head[..from_head]);
-                let from_body = body.len().min(buf.len() - from_head);
-                buf[from_head..from_head + from_body].copy_from_slice(&body[..from_body]);
-                (head, body) = (&head[from_head..], &body[from_body..]);
-                reader.notify_read(from_head + from_body);
+                fill(&mut reader, need, &mut record).map_err(|e| mcap_err(&c.path, c.offset, e))?;
             }
             LinearReadEvent::Record { opcode, data } => {
-                if let r @ (Record::Schema { .. } | Record::Channel(_) | Record::Message { .. }) =
-                    mcap::parse_record(opcode, data).map_err(bad)?
-                {
-                    records.push(r.into_owned());
-                }
+                records.extend(message_part(mcap::parse_record(opcode, data).map_err(bad)?));
             }
         }
     }
     Ok(records)
+}
+
+/// Answers the reader's request for `need` bytes from `src` (retried where a signal
+/// interrupts the read); the bytes read, none at the end.
+fn fill(reader: &mut LinearReader, need: usize, src: &mut impl Read) -> std::io::Result<usize> {
+    let n = loop {
+        match src.read(reader.insert(need)) {
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            r => break r?,
+        }
+    };
+    reader.notify_read(n);
+    Ok(n)
+}
+
+/// The records the messages need (schemas, channels, messages), owned; `None` for the others.
+fn message_part(r: Record<'_>) -> Option<Record<'static>> {
+    matches!(r, Record::Schema { .. } | Record::Channel(_) | Record::Message { .. }).then(|| r.into_owned())
 }
 
 /// A chunk to decompress, and where its records go.

@@ -270,7 +270,7 @@ fn scanner(a: &Args, scene: &str) -> anyhow::Result<Scanner> {
         ..ScanSettings::default()
     };
     preset.apply(&mut settings);
-    let rig = match a.get("--rig") {
+    let mut rig = match a.get("--rig") {
         None if a.get("--lasers") == Some("3") => {
             if !encoding.is_color() {
                 return Err(usage("--lasers 3: a grey camera cannot tell the lasers apart (--encoding rgb8 or bgr8)"));
@@ -289,7 +289,6 @@ fn scanner(a: &Args, scene: &str) -> anyhow::Result<Scanner> {
             rig
         }
     };
-    let mut rig = rig;
     for name in a.get("--horizontal").into_iter().flat_map(|l| l.split(',')) {
         let known = rig.cameras.iter().map(|c| c.name.clone()).collect::<Vec<_>>().join(", ");
         let cam = rig
