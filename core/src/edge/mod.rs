@@ -1755,6 +1755,25 @@ mod tests {
     }
 
     #[test]
+    fn elongated_highlight_in_the_first_frame_gives_no_samples() {
+        // A glossy highlight about 11 px wide (FWHM) and 32 rows long, like the one the hard
+        // preset renders on the body, in a laser-off frame that opens a scan: no earlier frame
+        // has told the line's width. (The real Ciclop line, 10-13 px wide, has runs of 23 rows
+        // that must stay: `tests/realdata.rs`.)
+        let mut img = image_from(160, 120, |y, a, _| {
+            let (x, y) = (a + 0.5 - 80.0, f64::from(y) - 60.0);
+            40.0 + 110.0 * (-(x * x) / (2.0 * 5.2 * 5.2) - (y * y) / (2.0 * 6.5 * 6.5)).exp()
+        });
+        add_noise(&mut img, 2.0, 17);
+        for m in SUBPIXEL_METHODS {
+            let mut d = EdgeDetector::new(EdgeConfig { method: m, ..Default::default() }).unwrap();
+            let mut out = LaserLine::default();
+            let stats = d.detect(&img.view().unwrap(), &mut out).unwrap();
+            assert_eq!(out.found(), 0, "{m:?}: {stats:?}");
+        }
+    }
+
+    #[test]
     fn highlight_beside_the_line_does_not_take_its_place() {
         // A line down column 40.3 and, beside it, a highlight brighter than the line.
         let mut img = image_from(120, 60, |y, a, b| {

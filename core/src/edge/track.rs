@@ -129,13 +129,34 @@ pub(super) fn typical_width(line: &LaserLine, min: usize, scratch: &mut Vec<f32>
     Some(*scratch.select_nth_unstable_by(mid, f32::total_cmp).1)
 }
 
-/// Runs shorter than this many times `min_run` are judged by their shape as well.
+/// Runs shorter than this many times `min_run` are judged by their length as well.
 const BLOB_RUNS: u32 = 4;
 
+/// A run that fades out at both ends (a glossy highlight's strength falls away from its middle
+/// as a blob's does) must have a body (its samples at least half as strong as its strong ones)
+/// at least this many times as long as its mean width. A line's strength is about even along
+/// it, and where a piece of it ends (an occlusion, a jump) it ends strong.
+const BODY_LENGTH_PER_WIDTH: f32 = 2.0;
+
+/// For a run `r` whose first and last samples are both less than half as strong as its
+/// 90th-percentile sample (not its strongest, which a speckle may raise): its samples at least
+/// that half. `None` for a run that ends strong at either end.
+fn faded_body(line: &LaserLine, r: &Run, scratch: &mut Vec<f32>) -> Option<usize> {
+    scratch.clear();
+    scratch
+        .extend((r.first..=r.last).filter(|&s| line.across(s as usize).is_finite()).map(|s| line.strength[s as usize]));
+    let (&first, &last) = (scratch.first()?, scratch.last()?);
+    let k = (scratch.len() * 9 / 10).min(scratch.len() - 1);
+    let half = 0.5 * *scratch.select_nth_unstable_by(k, f32::total_cmp).1;
+    (first < half && last < half).then(|| scratch.iter().filter(|&&v| v >= half).count())
+}
+
 /// Clears every run shorter than `min_run`, the samples of a kept run more than
-/// `WIDTH_TOLERANCE` times its median width, and every short run (under `BLOB_RUNS` times
-/// `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean width; returns the samples
-/// cleared.
+/// `WIDTH_TOLERANCE` times its median width, every short run (under `BLOB_RUNS` times
+/// `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean width, and every run that fades
+/// out at both ends with a body shorter than `BODY_LENGTH_PER_WIDTH` times its mean width (a
+/// highlight, before any frame has shown the line's width); returns the samples cleared. A run
+/// that spans the whole region is not judged by its length.
 ///
 /// With the line's typical width from earlier frames (`typical_width_px`), a run under
 /// `WIDE_RUNS` times `min_run` and more than `WIDTH_TOLERANCE` times as wide is dropped too: a
@@ -148,9 +169,13 @@ pub(super) fn drop_short_runs(
     scratch: &mut Vec<f32>,
 ) -> u32 {
     let mut dropped = 0;
-    for r in runs(line, range, cfg.max_jump_px) {
+    for r in runs(line, range.clone(), cfg.max_jump_px) {
         let width: f32 = (r.first..=r.last).map(|s| line.width[s as usize]).sum::<f32>() / r.count as f32;
-        let blob = r.count < BLOB_RUNS * cfg.min_run && (r.count as f32) < MIN_LENGTH_PER_WIDTH * width;
+        // A run that spans the whole region may be cut by it: its length says nothing.
+        let whole = r.first == range.start && r.last + 1 == range.end;
+        let blob = !whole
+            && ((r.count < BLOB_RUNS * cfg.min_run && (r.count as f32) < MIN_LENGTH_PER_WIDTH * width)
+                || faded_body(line, &r, scratch).is_some_and(|n| (n as f32) < BODY_LENGTH_PER_WIDTH * width));
         let too_wide =
             r.count < WIDE_RUNS * cfg.min_run && typical_width_px.is_some_and(|t| width > WIDTH_TOLERANCE * t);
         if r.count >= cfg.min_run && !blob && !too_wide {
