@@ -170,8 +170,10 @@ fn pyramid_320x240_mono8() {
 
 #[test]
 fn phantom_640x480_mono8() {
-    // Below the floor: RMS 0.46-0.51 mm, 0.06-0.13 % beyond 5 mm, dark print 69 %.
-    let b = Bounds { rms_m: 0.00056, beyond_5mm: 0.0015, dark_band: 0.60 };
+    // Meets the floor's 0.1 % beyond 5 mm (0.056 / 0.069 %; cam2 had 0.125 % before short runs
+    // 1.8 times the line's typical width were dropped). Below it: RMS 0.46-0.47 mm, dark print
+    // 69 %.
+    let b = Bounds { rms_m: 0.00052, dark_band: 0.60, ..Bounds::FLOOR_640 };
     check(&scan("phantom", (640, 480), Encoding::Mono8, 0.070, Method::CenterOfGravity), b);
 }
 
@@ -226,16 +228,18 @@ fn fast_scan_meshes_its_anisotropic_grid() {
     check(&cams, Bounds { rms_m: 0.00072, beyond_5mm: 0.003, dark_band: 0.38 });
 }
 
-/// Debug aid: where the points beyond 5 mm lie (frame, row, point, distance).
+/// Debug aid: where the points beyond 5 mm lie (frame, row, point, distance) after the mesher's
+/// rejection of contradicted points (`RAW=1`: before it). `SCENE`, `W`, `RGB`, `CAM`, `SPEED`.
 #[test]
 #[ignore]
 fn probe_outliers() {
     let scene = std::env::var("SCENE").unwrap_or("pyramid".into());
     let w: u32 = std::env::var("W").map_or(320, |v| v.parse().unwrap());
     let enc = if std::env::var("RGB").is_ok() { Encoding::Rgb8 } else { Encoding::Mono8 };
+    let speed: f64 = std::env::var("SPEED").map_or(0.070, |v| v.parse().unwrap());
     let h = w * 3 / 4;
     let rig = Rig::study(w, h);
-    let mut settings = ScanSettings { encoding: enc, ..Default::default() };
+    let mut settings = ScanSettings { encoding: enc, speed_mps: speed, ..Default::default() };
     Preset::Hard.apply(&mut settings);
     let s = Scanner::new(Scene::by_name(&scene).unwrap(), rig.clone(), Preset::Hard.laser(), settings).unwrap();
     let mut poses = PoseTrack::default();
@@ -252,25 +256,50 @@ fn probe_outliers() {
     .unwrap();
     let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
     let (mut line, mut prof) = (LaserLine::default(), Profile::default());
+    let mut grid = Grid::new(h as usize);
+    let mut lines = Vec::new();
     for f in 0..s.frame_count() {
         let ft = s.frame_time(f);
         det.detect(&s.render(cam, f).view().unwrap(), &mut line).unwrap();
         tri.triangulate(&line, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
-        for (i, p) in prof.points.iter().enumerate() {
-            if !p[0].is_finite() {
-                continue;
-            }
-            let e = s.scene.signed_distance(Vec3::new(p[0].into(), p[1].into(), p[2].into()));
-            if e.abs() > 0.005 {
+        grid.push(ft.stamp_ns, &prof).unwrap();
+        lines.push(line.clone());
+    }
+    // `FRAME=f`: that frame's every sample, before the rejection.
+    if let Some(f) = std::env::var("FRAME").ok().and_then(|v| v.parse::<usize>().ok()) {
+        for i in 0..h as usize {
+            let (l, p) = (&lines[f], grid.points()[f * h as usize + i]);
+            if l.u[i].is_finite() {
+                let e = s.scene.signed_distance(Vec3::new(p[0].into(), p[1].into(), p[2].into()));
                 eprintln!(
-                    "frame {f} row {i}: u {:.2} width {:.2} strength {:.0} point {:?} distance {:+.1} mm",
-                    line.u[i],
-                    line.width[i],
-                    line.strength[i],
-                    p,
+                    "row {i}: u {:.2} width {:.2} strength {:.0} distance {:+.1} mm",
+                    l.u[i],
+                    l.width[i],
+                    l.strength[i],
                     e * 1e3
                 );
             }
+        }
+    }
+    if std::env::var("RAW").is_err() {
+        grid.clean(&MeshConfig { fill_single_holes: false, ..Default::default() });
+    }
+    for (k, p) in grid.points().iter().enumerate() {
+        let (f, i) = (k / h as usize, k % h as usize);
+        if !p[0].is_finite() {
+            continue;
+        }
+        let e = s.scene.signed_distance(Vec3::new(p[0].into(), p[1].into(), p[2].into()));
+        if e.abs() > 0.005 {
+            let l = &lines[f];
+            eprintln!(
+                "frame {f} row {i}: u {:.2} width {:.2} strength {:.0} point {:?} distance {:+.1} mm",
+                l.u[i],
+                l.width[i],
+                l.strength[i],
+                p,
+                e * 1e3
+            );
         }
     }
 }

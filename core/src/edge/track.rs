@@ -114,8 +114,12 @@ const MIN_LENGTH_PER_WIDTH: f32 = 2.0;
 
 /// Runs shorter than this many times `min_run` are compared with the line's typical width.
 const WIDE_RUNS: u32 = 10;
-/// A run this many times wider than the line's typical width is not the line.
+/// A sample of a kept run this many times wider than the run's median width is not the line.
 const WIDTH_TOLERANCE: f32 = 2.5;
+/// A short run this many times wider than the line's typical width is not the line: a
+/// highlight, or the line spread over a grazing surface or mixed pixels (on the hard phantom
+/// such a run lay 5-9 mm off, widening from 3 to 10 px while the line beside it was 2-3 px).
+const WIDE_RUN_TOLERANCE: f32 = 1.8;
 
 /// The typical width of the line in `line` (the median of its samples' widths), if it has at
 /// least `min` samples.
@@ -159,7 +163,7 @@ fn faded_body(line: &LaserLine, r: &Run, scratch: &mut Vec<f32>) -> Option<usize
 /// that spans the whole region is not judged by its length.
 ///
 /// With the line's typical width from earlier frames (`typical_width_px`), a run under
-/// `WIDE_RUNS` times `min_run` and more than `WIDTH_TOLERANCE` times as wide is dropped too: a
+/// `WIDE_RUNS` times `min_run` and more than `WIDE_RUN_TOLERANCE` times as wide is dropped too: a
 /// highlight, or a bright mark, in a frame after the laser went off.
 pub(super) fn drop_short_runs(
     line: &mut LaserLine,
@@ -177,7 +181,7 @@ pub(super) fn drop_short_runs(
             && ((r.count < BLOB_RUNS * cfg.min_run && (r.count as f32) < MIN_LENGTH_PER_WIDTH * width)
                 || faded_body(line, &r, scratch).is_some_and(|n| (n as f32) < BODY_LENGTH_PER_WIDTH * width));
         let too_wide =
-            r.count < WIDE_RUNS * cfg.min_run && typical_width_px.is_some_and(|t| width > WIDTH_TOLERANCE * t);
+            r.count < WIDE_RUNS * cfg.min_run && typical_width_px.is_some_and(|t| width > WIDE_RUN_TOLERANCE * t);
         if r.count >= cfg.min_run && !blob && !too_wide {
             // A kept run: its samples far wider than its own median are mixed pixels (the line
             // straddling a dark/bright edge, or running into a highlight).
