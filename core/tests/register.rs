@@ -176,7 +176,21 @@ use xsurf_core::synth::Preset;
 /// off by 2 mm / 0.3 degrees; each as its distance to the truth (mm, degrees), or the refusal.
 type Placed = Result<(f64, f64), RefineError>;
 
-fn refined(scene: &str, (w, h): (u32, u32), encoding: Encoding, preset: Preset, speed_mps: f64) -> (Placed, Placed) {
+/// cam2's surface, RMS distance to the true surface in mm: triangulated through the true
+/// placement, through the perturbed one, and after the perturbed one was refined (or refused).
+struct Surfaces {
+    truth: f64,
+    perturbed: f64,
+    refined: f64,
+}
+
+fn refined(
+    scene: &str,
+    (w, h): (u32, u32),
+    encoding: Encoding,
+    preset: Preset,
+    speed_mps: f64,
+) -> (Placed, Placed, Surfaces) {
     let mesh = MeshConfig::default();
     let rig = Rig::study(w, h);
     let mut settings = ScanSettings { speed_mps, encoding, ..Default::default() };
@@ -192,6 +206,7 @@ fn refined(scene: &str, (w, h): (u32, u32), encoding: Encoding, preset: Preset, 
         }
         g
     };
+    let surface = |g: &Grid| rms_mm(&scanner.scene, &finite(g).collect::<Vec<_>>());
     let g = grids(&rig);
     let to_truth = |r: xsurf_core::register::RefineReport| placement_error(&e2, &r.carm_from_optical);
     let exact = refine_grid(&g[0], &mut g[1].clone(), &e2, &plane, &motion, &RefineConfig::default()).map(to_truth);
@@ -199,29 +214,50 @@ fn refined(scene: &str, (w, h): (u32, u32), encoding: Encoding, preset: Preset, 
     let mut stale = rig.clone();
     stale.cameras[1].set_carm_from_optical(&bad);
     let mut g2 = grids(&stale).swap_remove(1);
+    let perturbed_surface = surface(&g2);
     let perturbed = refine_grid(&g[0], &mut g2, &bad, &plane, &motion, &RefineConfig::default()).map(to_truth);
-    (exact, perturbed)
+    let surfaces = Surfaces { truth: surface(&g[1]), perturbed: perturbed_surface, refined: surface(&g2) };
+    (exact, perturbed, surfaces)
 }
 
 /// On the hard pyramid at 320x240 the fit once slid along a direction the data hardly hold and
 /// accepted cam2 at 6.8 mm / 0.42 degrees from the truth, having started 2 mm / 0.3 degrees
-/// off. A refinement must never make a camera worse: refused, or nearer the truth in both.
+/// off. A refinement must never make a camera worse: refused, or its surface as near the truth
+/// as the true placement's and its placement no further from the truth than where it started.
+///
+/// The surface is the measure, the placement only a bound: at this resolution the data hold
+/// five of the six directions of the placement, and along the sixth (a shift and turn together,
+/// 5 mm / 0.3 degrees at one standard deviation) the camera stays as it was given and its
+/// surface does not change. Where it ends along that valley moved from 1.8 to 2.5 mm when a few
+/// hundred dim samples on the dark print were added, with the surface at the truth's 0.67 mm
+/// RMS both times.
 #[test]
 fn a_perturbed_camera_is_never_made_worse_on_a_hard_scan() {
-    let (exact, perturbed) = refined("pyramid", (320, 240), Encoding::Mono8, Preset::Hard, 0.07);
+    let (exact, perturbed, s) = refined("pyramid", (320, 240), Encoding::Mono8, Preset::Hard, 0.07);
     match exact {
         Ok((dt, dr)) => assert!(dt < 0.5 && dr < 0.05, "a correct calibration moved by {dt} mm / {dr} deg"),
         Err(e) => eprintln!("the true calibration kept: {e}"),
     }
+    eprintln!(
+        "cam2's surface RMS: {:.3} mm through the truth, {:.3} mm perturbed, {:.3} mm refined",
+        s.truth, s.perturbed, s.refined
+    );
+    assert!(s.perturbed > 3.0 * s.truth, "the perturbation must matter: {} vs {} mm", s.perturbed, s.truth);
     match perturbed {
         Ok((dt, dr)) => {
             eprintln!("cam2 off by 2 mm / 0.3 deg, refined to {dt:.3} mm / {dr:.4} deg of the truth");
-            assert!(dt < 2.0 && dr < 0.3, "made worse: {dt} mm / {dr} deg from the truth");
+            assert!(s.refined <= 1.05 * s.truth, "refined surface {} mm vs the truth's {} mm", s.refined, s.truth);
+            // No further than the 2 mm / 0.3 degree start, the turn taken at a metre (5.6 mm
+            // together); the old slide to 6.8 mm / 0.42 degrees was 10 mm.
+            let along = (dt * dt + (dr.to_radians() * 1e3).powi(2)).sqrt();
+            assert!(along < 5.5 && dr < 0.3, "made worse: {dt} mm / {dr} deg from the truth");
         }
-        Err(e) => eprintln!("the perturbed placement kept: {e}"),
+        Err(e) => {
+            eprintln!("the perturbed placement kept: {e}");
+            assert_eq!(s.refined, s.perturbed, "a refusal leaves the grid as it was");
+        }
     }
 }
-
 /// The refinement on the `hard` preset's scans and the bundled bags' (issue 17): where the
 /// true calibration is left (the floor: within 0.5 mm / 0.05 degrees, or refused), and where
 /// cam2, off by 2 mm / 0.3 degrees, is put. A report, not a test: the floor is not met on every
@@ -242,9 +278,13 @@ fn refinement_on_hard_scans() {
         ("pyramid", (320, 240), Encoding::Mono8, Preset::Ideal, 0.14),
         ("phantom", (320, 240), Encoding::Mono8, Preset::Ideal, 0.14),
     ] {
-        let (exact, perturbed) = refined(scene, size, encoding, preset, speed);
+        let (exact, perturbed, s) = refined(scene, size, encoding, preset, speed);
         let what = format!("{scene} {}x{} {encoding:?} {preset:?}", size.0, size.1);
         eprintln!("{what}, the true calibration: {}", show(exact));
         eprintln!("{what}, cam2 off by 2 mm / 0.3 deg: {}", show(perturbed));
+        eprintln!(
+            "{what}, cam2's surface RMS: {:.3} mm through the truth, {:.3} perturbed, {:.3} refined",
+            s.truth, s.perturbed, s.refined
+        );
     }
 }

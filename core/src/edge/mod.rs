@@ -635,14 +635,57 @@ fn find_peak<S: Sample>(
             let level = f0.mean + 0.5 * (peak - f0.mean);
             let w0 = crossing(p, hi + 1, hi, level) - crossing(p, lo - 1, lo, level);
             let near = ((GAP_PER_WIDTH * w0).ceil() as usize).clamp(1, max_hw);
-            match background(p, m, near, flank).filter(|_| near < gap) {
-                Some(f) => judge(p, m, &f, None, cfg, (scale, saturation), run),
-                None => Err(run),
-            }
+            let beside = background(p, m, near, flank)
+                .filter(|_| near < gap)
+                .map_or(Err(run), |f| judge(p, m, &f, None, cfg, (scale, saturation), run));
+            // On a dark surface a few pixels from a brighter one (dark print beside bare skin
+            // under room light), even the flanks `near` out reach the bright surface: the
+            // background is then the dark samples between the line and it.
+            beside.or_else(|_| {
+                let f = dark_background(p, (lo, hi), flank, level).ok_or(run)?;
+                judge(p, m, &f, None, cfg, (scale, saturation), run)
+            })
         }
         other => other,
     }
 }
+
+/// The flanks from two samples beyond the half-maximum run `(lo, hi)` outwards, each the
+/// samples below `level` (at most `flank`) up to the first sample that is not (a brighter
+/// surface beside the line). `None` unless each side has at least `DARK_FLANK` samples and
+/// ends at such a sample or at its full length, never at the profile's end.
+fn dark_background<S: Sample>(p: &[S], (lo, hi): (usize, usize), flank: usize, level: f32) -> Option<Flanks> {
+    let end = lo.checked_sub(1)?;
+    let mut start = end;
+    while start > 0 && end - start < flank && p[start - 1].f() < level {
+        start -= 1;
+    }
+    let rstart = hi + 2;
+    let mut rend = rstart.min(p.len());
+    while rend < p.len() && rend - rstart < flank && p[rend].f() < level {
+        rend += 1;
+    }
+    let closed = |a: usize, b: usize, edge: bool| b - a >= DARK_FLANK && (b - a == flank || !edge);
+    if !closed(start, end, start == 0) || !closed(rstart, rend, rend == p.len()) {
+        return None;
+    }
+    let side = |a: usize, b: usize| {
+        let (s, q) = S::moments(p, a, b);
+        let k = b - a;
+        Side { mean: s / k as f32, centre: 0.5 * (a + b) as f32 - 0.5, ss: q - s * s / k as f32, count: k }
+    };
+    let (l, r) = (side(start, end), side(rstart, rend));
+    let n = (l.count + r.count) as f32;
+    Some(Flanks {
+        left: (l.mean, l.centre),
+        right: (r.mean, r.centre),
+        mean: (l.mean * l.count as f32 + r.mean * r.count as f32) / n,
+        noise: ((l.ss + r.ss).max(0.0) / n).sqrt(),
+    })
+}
+
+/// The fewest samples of a flank between a narrow line and a brighter surface beside it.
+const DARK_FLANK: usize = 2;
 
 /// The tests of a peak at `m` against its flanks `f`, and its centre: too weak for the local
 /// noise, a step rather than a peak, cut off by the edge of the profile, or too wide or narrow
@@ -1814,6 +1857,37 @@ mod tests {
         let mut flat = image_from(140, 200, |_, _, _| 8.0);
         add_noise(&mut flat, noise, 22);
         assert_eq!(detect(&flat, EdgeConfig::default()).found(), 0);
+    }
+
+    #[test]
+    fn dim_line_on_dark_print_beside_a_bright_surface_is_found() {
+        // The hard preset's dark print in grey: the line (43 grey levels over a print at 9) a
+        // few pixels from the edge of bare surface under room light (46), brighter than the
+        // line's own flank a step away. Each side of the edge, at 3.5 to 6 px.
+        let top = box_line(-0.5, 0.5, 0.0, 1.8);
+        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
+        for gap in [3.5, 4.0, 5.0, 6.0] {
+            for mirror in [false, true] {
+                let centre = |y: u32| 60.0 + 0.05 * f64::from(y);
+                let mut img = image_from(120, 60, |y, a, b| {
+                    let c = centre(y);
+                    let x = a + 0.5 - c;
+                    let bright = if mirror { smooth(x - gap) } else { smooth(-x - gap) };
+                    9.0 + 37.0 * bright + 43.0 * box_line(a, b, c, 1.8) / top
+                });
+                add_noise(&mut img, 2.0, 29);
+                for m in SUBPIXEL_METHODS {
+                    let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+                    let errs: Vec<f64> = (0..60u32)
+                        .filter_map(|y| Some(f64::from(out.u[y as usize]) - centre(y)).filter(|e| e.is_finite()))
+                        .collect();
+                    let what = format!("{m:?}, edge {gap} px to the {}", if mirror { "right" } else { "left" });
+                    assert!(errs.len() >= 57, "{what}: found in {} of 60 rows", errs.len());
+                    let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+                    assert!(rms < 0.25, "{what}: rms {rms:.3} px");
+                }
+            }
+        }
     }
 
     #[test]
