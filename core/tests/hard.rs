@@ -151,9 +151,9 @@ fn pyramid_640x480_mono8() {
 
 #[test]
 fn pyramid_640x480_rgb8() {
-    // Meets the floor but for the RMS (0.45-0.46 mm).
-    let b = Bounds { rms_m: 0.0005, ..Bounds::FLOOR_640 };
-    check(&scan("pyramid", (640, 480), Encoding::Rgb8, 0.070, Method::CenterOfGravity), b);
+    // Meets the floor (RMS 0.37 mm; 0.45-0.46 mm before a line that saturates the red channel
+    // was placed on it rather than on red minus the others).
+    check(&scan("pyramid", (640, 480), Encoding::Rgb8, 0.070, Method::CenterOfGravity), Bounds::FLOOR_640);
 }
 
 #[test]
@@ -179,8 +179,9 @@ fn phantom_640x480_mono8() {
 
 #[test]
 fn phantom_640x480_rgb8() {
-    // Meets the floor but for the RMS (0.54-0.57 mm).
-    let b = Bounds { rms_m: 0.00063, ..Bounds::FLOOR_640 };
+    // Meets the floor but for the RMS (0.47-0.48 mm; 0.54-0.57 mm before a saturated line was
+    // placed on the red channel).
+    let b = Bounds { rms_m: 0.00052, ..Bounds::FLOOR_640 };
     check(&scan("phantom", (640, 480), Encoding::Rgb8, 0.070, Method::CenterOfGravity), b);
 }
 

@@ -16,7 +16,8 @@ xsurf_runtime::parameters! {
         method: Method = D.method, via Choice;
         /// vertical: one sample per image row; horizontal: one per column
         line_orientation: Orientation = D.line_orientation, via Choice;
-        /// signal of colour images: red_minus_others (the laser's colour against the others),
+        /// signal of colour images: red_minus_others (the laser's colour against the others;
+        /// a line that saturates the laser's own channel is placed on that channel),
         /// green_minus_others, blue_minus_others, red, green, blue, luma; with `lasers`, each
         /// laser's line is found in its own colour against the others instead
         channel: Channel = D.channel, via Choice;
