@@ -266,41 +266,29 @@ fn probe_outliers() {
         grid.push(ft.stamp_ns, &prof).unwrap();
         lines.push(line.clone());
     }
+    // One sample: where the line was found, how wide and strong, and its point's distance to
+    // the true surface.
+    let sample = |grid: &Grid, f: usize, i: usize| {
+        let (l, p) = (&lines[f], grid.points()[f * h as usize + i]);
+        let e = s.scene.signed_distance(Vec3::new(p[0].into(), p[1].into(), p[2].into()));
+        let what = format!("u {:.2} width {:.2} strength {:.0}", l.u[i], l.width[i], l.strength[i]);
+        (what, p, e)
+    };
     // `FRAME=f`: that frame's every sample, before the rejection.
     if let Some(f) = std::env::var("FRAME").ok().and_then(|v| v.parse::<usize>().ok()) {
-        for i in 0..h as usize {
-            let (l, p) = (&lines[f], grid.points()[f * h as usize + i]);
-            if l.u[i].is_finite() {
-                let e = s.scene.signed_distance(Vec3::new(p[0].into(), p[1].into(), p[2].into()));
-                eprintln!(
-                    "row {i}: u {:.2} width {:.2} strength {:.0} distance {:+.1} mm",
-                    l.u[i],
-                    l.width[i],
-                    l.strength[i],
-                    e * 1e3
-                );
-            }
+        for i in (0..h as usize).filter(|&i| lines[f].u[i].is_finite()) {
+            let (what, _, e) = sample(&grid, f, i);
+            eprintln!("row {i}: {what} distance {:+.1} mm", e * 1e3);
         }
     }
     if std::env::var("RAW").is_err() {
         grid.clean(&MeshConfig { fill_single_holes: false, ..Default::default() });
     }
-    for (k, p) in grid.points().iter().enumerate() {
+    for k in (0..grid.points().len()).filter(|&k| grid.points()[k][0].is_finite()) {
         let (f, i) = (k / h as usize, k % h as usize);
-        if !p[0].is_finite() {
-            continue;
-        }
-        let e = s.scene.signed_distance(Vec3::new(p[0].into(), p[1].into(), p[2].into()));
+        let (what, p, e) = sample(&grid, f, i);
         if e.abs() > 0.005 {
-            let l = &lines[f];
-            eprintln!(
-                "frame {f} row {i}: u {:.2} width {:.2} strength {:.0} point {:?} distance {:+.1} mm",
-                l.u[i],
-                l.width[i],
-                l.strength[i],
-                p,
-                e * 1e3
-            );
+            eprintln!("frame {f} row {i}: {what} point {p:?} distance {:+.1} mm", e * 1e3);
         }
     }
 }
