@@ -1748,14 +1748,18 @@ mod tests {
         // filters pass it), 2.5 px wide, with noise in each channel: red minus the others sees
         // a flat top below 255 and no saturation.
         let top = box_line(-0.5, 0.5, 0.0, 2.5);
-        let centre = |y: u32| 60.0 + 0.0513 * f64::from(y);
-        let (w, h) = (120u32, 60u32);
-        for rgb in [true, false] {
+        let centre = |along: u32| 60.0 + 0.0513 * f64::from(along);
+        let (n, across) = (60u32, 120u32);
+        // A vertical line (one sample per row) and the same line lying horizontally (one sample
+        // per column, read by columns from the rows).
+        for (rgb, vertical) in [(true, true), (false, true), (true, false), (false, false)] {
+            let (w, h) = if vertical { (across, n) } else { (n, across) };
             let mut img = Image::new(w, h, if rgb { Encoding::Rgb8 } else { Encoding::Bgr8 });
             let mut rng = crate::synth::SplitMix::new(41);
             for y in 0..h {
                 for x in 0..w {
-                    let laser = 400.0 * box_line(f64::from(x) - 0.5, f64::from(x) + 0.5, centre(y), 2.5) / top;
+                    let (s, a) = if vertical { (y, x) } else { (x, y) };
+                    let laser = 400.0 * box_line(f64::from(a) - 0.5, f64::from(a) + 0.5, centre(s), 2.5) / top;
                     let px = 3 * (y * w + x) as usize;
                     let mut put = |k: usize, v: f64| {
                         img.data[px + k] = (v + 2.0 * rng.normal()).round().clamp(0.0, 255.0) as u8;
@@ -1766,19 +1770,22 @@ mod tests {
                     put(2, if rgb { b } else { r });
                 }
             }
-            assert!(img.data.iter().filter(|&&v| v == 255).count() > 2 * h as usize, "the red channel clips");
+            assert!(img.data.iter().filter(|&&v| v == 255).count() > 2 * n as usize, "the red channel clips");
+            let line_orientation = if vertical { Orientation::Vertical } else { Orientation::Horizontal };
             // The parabolic method is left out: on the flat top of red minus the others it is
             // 0.8 px off, further than the laser's channel is let move a sample.
             for m in [Method::CenterOfGravity, Method::Gaussian] {
-                let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
-                let errs: Vec<f64> =
-                    (0..h).map(|y| f64::from(out.u[y as usize]) - centre(y)).filter(|e| e.is_finite()).collect();
-                assert_eq!(errs.len(), h as usize, "{m:?}: every row found");
+                let out = detect(&img, EdgeConfig { method: m, line_orientation, ..Default::default() });
+                let errs: Vec<f64> = (0..n)
+                    .map(|s| f64::from(if vertical { out.u[s as usize] } else { out.v[s as usize] }) - centre(s))
+                    .filter(|e| e.is_finite())
+                    .collect();
+                let what = format!("{m:?}, {}, {}", if rgb { "rgb8" } else { "bgr8" }, line_orientation.name());
+                assert_eq!(errs.len(), n as usize, "{what}: every sample found");
                 let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
                 let bias = errs.iter().sum::<f64>() / errs.len() as f64;
                 // Placed on red minus the others: rms 0.031-0.035 px (centre of gravity) and
                 // 0.049-0.053 px (Gaussian); on the red channel 0.027-0.030 and 0.024-0.026.
-                let what = format!("{m:?}, {}", if rgb { "rgb8" } else { "bgr8" });
                 assert!(rms < 0.03 && bias.abs() < 0.01, "{what}: rms {rms:.4} px, bias {bias:+.4} px");
             }
         }
