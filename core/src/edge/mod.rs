@@ -520,14 +520,20 @@ fn background<S: Sample>(p: &[S], m: usize, gap: usize, flank: usize) -> Option<
     if end - start < need || rend < rstart + need {
         return None;
     }
-    let (l, r) = (side(p, start, end), side(p, rstart, rend));
-    let n = (l.count + r.count) as f32;
-    Some(Flanks {
-        left: (l.mean, l.centre),
-        right: (r.mean, r.centre),
-        mean: (l.mean * l.count as f32 + r.mean * r.count as f32) / n,
-        noise: ((l.ss + r.ss).max(0.0) / n).sqrt(),
-    })
+    Some(Flanks::of(side(p, start, end), side(p, rstart, rend)))
+}
+
+impl Flanks {
+    /// The background of the two flanks `l` and `r`.
+    fn of(l: Side, r: Side) -> Flanks {
+        let n = (l.count + r.count) as f32;
+        Flanks {
+            left: (l.mean, l.centre),
+            right: (r.mean, r.centre),
+            mean: (l.mean * l.count as f32 + r.mean * r.count as f32) / n,
+            noise: ((l.ss + r.ss).max(0.0) / n).sqrt(),
+        }
+    }
 }
 
 /// One flank's level: its mean, where it was taken, and the sum of squares about it.
@@ -536,6 +542,19 @@ struct Side {
     centre: f32,
     ss: f32,
     count: usize,
+}
+
+impl Side {
+    /// The level of the `count` samples from `start` whose sum is `sum` and sum of squares
+    /// `squares`.
+    fn of(sum: f32, squares: f32, count: usize, start: usize) -> Side {
+        Side {
+            mean: sum / count as f32,
+            centre: 0.5 * (2 * start + count) as f32 - 0.5,
+            ss: squares - sum * sum / count as f32,
+            count,
+        }
+    }
 }
 
 /// The level of `p[start..end]`: its mean, or, where its two halves disagree by more than the
@@ -547,12 +566,7 @@ fn side<S: Sample>(p: &[S], start: usize, end: usize) -> Side {
     let h = k / 2;
     let (a, b) = S::moments(p, start, start + h);
     let (c, d) = S::moments(p, start + h, end);
-    let whole = |a: f32, b: f32, k: usize, start: usize| Side {
-        mean: a / k as f32,
-        centre: 0.5 * (2 * start + k) as f32 - 0.5,
-        ss: b - a * a / k as f32,
-        count: k,
-    };
+    let whole = Side::of;
     if h < 2 || k - h < 2 {
         return whole(a + c, b + d, k, start);
     }
@@ -669,19 +683,12 @@ fn dark_background<S: Sample>(p: &[S], (lo, hi): (usize, usize), flank: usize, l
     if !closed(start, end, start == 0) || !closed(rstart, rend, rend == p.len()) {
         return None;
     }
-    let side = |a: usize, b: usize| {
-        let (s, q) = S::moments(p, a, b);
-        let k = b - a;
-        Side { mean: s / k as f32, centre: 0.5 * (a + b) as f32 - 0.5, ss: q - s * s / k as f32, count: k }
+    // The whole of each flank: its halves are not compared, the brighter surface is outside it.
+    let whole = |a: usize, b: usize| {
+        let (sum, squares) = S::moments(p, a, b);
+        Side::of(sum, squares, b - a, a)
     };
-    let (l, r) = (side(start, end), side(rstart, rend));
-    let n = (l.count + r.count) as f32;
-    Some(Flanks {
-        left: (l.mean, l.centre),
-        right: (r.mean, r.centre),
-        mean: (l.mean * l.count as f32 + r.mean * r.count as f32) / n,
-        noise: ((l.ss + r.ss).max(0.0) / n).sqrt(),
-    })
+    Some(Flanks::of(whole(start, end), whole(rstart, rend)))
 }
 
 /// The fewest samples of a flank between a narrow line and a brighter surface beside it.
@@ -1294,7 +1301,9 @@ fn recentre_on_laser(
         if !(a..b).contains(&m0) {
             continue;
         }
-        let at = |k: usize| if vertical { image.row(s)[3 * k + lane] } else { image.row(k as u32)[3 * i + lane] };
+        // A vertical line's sample is a row; a horizontal line's a column, read across the rows.
+        let row = if vertical { image.row(s) } else { &[] };
+        let at = |k: usize| if vertical { row[3 * k + lane] } else { image.row(k as u32)[3 * i + lane] };
         let near = m0.saturating_sub(1).max(a)..(m0 + 2).min(b);
         if !near.clone().any(|k| at(k) >= saturation) {
             continue;
@@ -1784,8 +1793,9 @@ mod tests {
                 assert_eq!(errs.len(), n as usize, "{what}: every sample found");
                 let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
                 let bias = errs.iter().sum::<f64>() / errs.len() as f64;
-                // Placed on red minus the others: rms 0.031-0.035 px (centre of gravity) and
-                // 0.049-0.053 px (Gaussian); on the red channel 0.027-0.030 and 0.024-0.026.
+                // The vertical line placed on red minus the others: rms 0.031-0.035 px (centre
+                // of gravity) and 0.049-0.053 px (Gaussian); on the red channel 0.027-0.030 and
+                // 0.024-0.026.
                 assert!(rms < 0.03 && bias.abs() < 0.01, "{what}: rms {rms:.4} px, bias {bias:+.4} px");
             }
         }
