@@ -163,8 +163,10 @@ fn pyramid_320x240_rgb8() {
 
 #[test]
 fn pyramid_320x240_mono8() {
-    // Below the floor: RMS 0.88 / 0.67 mm, 0.25 % beyond 5 mm, dark print 22-60 %.
-    let b = Bounds { rms_m: 0.00097, beyond_5mm: 0.003, dark_band: 0.18 };
+    // Meets the floor's RMS (0.72 / 0.67 mm) and 0.1 % beyond 5 mm (0.038 / 0 %; 0.88 mm and
+    // 0.25 % for cam1 before a bright face ending beside the line was told from the line's own
+    // light). Below it: the dark print, 22-60 %.
+    let b = Bounds { dark_band: 0.18, ..Bounds::FLOOR_320 };
     check(&scan("pyramid", (320, 240), Encoding::Mono8, 0.070, Method::CenterOfGravity), b);
 }
 
@@ -172,8 +174,9 @@ fn pyramid_320x240_mono8() {
 fn phantom_640x480_mono8() {
     // Meets the floor's 0.1 % beyond 5 mm (0.056 / 0.069 %; cam2 had 0.125 % before short runs
     // 1.8 times the line's typical width were dropped) and the dark print (99.3-99.8 %; 69-70 %
-    // before). Below it: RMS 0.46-0.47 mm.
-    let b = Bounds { rms_m: 0.00052, ..Bounds::FLOOR_640 };
+    // before). Below it: RMS 0.44 / 0.44 mm (0.46 / 0.47 before a bright face ending beside
+    // the line was told from the line's own light).
+    let b = Bounds { rms_m: 0.00048, ..Bounds::FLOOR_640 };
     check(&scan("phantom", (640, 480), Encoding::Mono8, 0.070, Method::CenterOfGravity), b);
 }
 
@@ -187,9 +190,10 @@ fn phantom_640x480_rgb8() {
 
 #[test]
 fn phantom_320x240() {
-    // Below the floor: in grey RMS 0.86-0.88 mm, 0.33-0.41 % beyond 5 mm, the dark print 75 %;
-    // in colour 0.20-0.22 % beyond 5 mm (the RMS, 0.78-0.79 mm, meets it).
-    let mono = Bounds { rms_m: 0.00097, beyond_5mm: 0.005, dark_band: 0.70 };
+    // Below the floor: in grey RMS 0.85 / 0.81 mm, 0.35 / 0.24 % beyond 5 mm (0.88 / 0.86 mm
+    // and 0.41 / 0.33 % before a bright face beside the line was told from it), the dark print
+    // 75 %; in colour 0.20-0.22 % beyond 5 mm (the RMS, 0.78-0.79 mm, meets it).
+    let mono = Bounds { rms_m: 0.00092, beyond_5mm: 0.004, dark_band: 0.70 };
     check(&scan("phantom", (320, 240), Encoding::Mono8, 0.070, Method::CenterOfGravity), mono);
     let rgb = Bounds { beyond_5mm: 0.0025, ..Bounds::FLOOR_320 };
     check(&scan("phantom", (320, 240), Encoding::Rgb8, 0.070, Method::CenterOfGravity), rgb);
@@ -199,12 +203,13 @@ fn phantom_320x240() {
 fn body_320x240_mono8_takes_no_highlight_for_the_line() {
     // The scan opens with laser-off frames: a glossy highlight on the body (about 12 px wide,
     // 25 rows) came before any frame had shown the line's width, and was placed 28 cm off the
-    // body (42 points, RMS 5.1 mm). Below the floor: coverage 93-94 % (the hair is lost in
-    // grey), cam2 0.14 % beyond 5 mm.
+    // body (42 points, RMS 5.1 mm). Below the floor: coverage 94 % (the hair is lost in grey).
+    // Beyond 5 mm 0.039 / 0.047 % (cam2 0.12 % before a bright face beside the line was told
+    // from it).
     for c in scan("body", (320, 240), Encoding::Mono8, 0.140, Method::CenterOfGravity) {
         assert_eq!(c.laser_off_points, 0, "{}: points in laser-off frames", c.name);
         assert!(c.rms_m <= Bounds::FLOOR_320.rms_m, "{}: rms {:.3} mm", c.name, c.rms_m * 1e3);
-        assert!(c.beyond_5mm <= 0.002, "{}: {:.3} % beyond 5 mm", c.name, c.beyond_5mm * 100.0);
+        assert!(c.beyond_5mm <= Bounds::FLOOR_320.beyond_5mm, "{}: {:.3} % beyond 5 mm", c.name, c.beyond_5mm * 100.0);
         assert!(c.table_median_m.abs() <= 0.0001, "{}: table median {:+.3} mm", c.name, c.table_median_m * 1e3);
         assert!(c.coverage >= 0.92 && c.mesh_over_points >= 0.95, "{c:?}");
     }
