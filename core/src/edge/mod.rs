@@ -736,17 +736,27 @@ fn judge<S: Sample>(
     let saturated = peak >= saturation;
     // The centre's samples: above `peak_fraction` of the peak over the higher flank, so that on
     // a step (a bright face on one side) the run does not spill into the face; at most half the
-    // peak over the background, so that the run is never empty. A bright face may also end
-    // before the flank does (a highlight beside the line, whose flank then reads the darker
-    // surface beyond it): the lower of the two samples two and three beyond the half-maximum
-    // run stands for it on each side (a line's own tail is still falling there) when it
-    // stands clearly above the flanks.
+    // peak over the background, so that the run is never empty.
+    let level_over = |high: f32| {
+        (bg + cfg.peak_fraction * strength).max(high + cfg.peak_fraction * (peak - high)).min(bg + 0.5 * strength)
+    };
+    let high = f.left.0.max(f.right.0);
+    let mut level = level_over(high);
+    // A bright face may also end before the flank does (a highlight beside the line, whose
+    // flank then reads the darker surface beyond it), and the run spill onto it: the lower of
+    // the two samples two and three beyond the half-maximum run stands for the face on each
+    // side (a line's own tail is still falling there) when it stands clearly above the flanks,
+    // and the centre's samples are those above it.
     let at = |i: usize| p[i.min(n - 1)].f();
-    let shoulder = at(l.saturating_sub(2)).min(at(l.saturating_sub(3))).max(at(r + 2).min(at(r + 3)));
-    let stepped = shoulder - f.left.0.max(f.right.0) > floor;
-    let high = if stepped { shoulder } else { f.left.0.max(f.right.0) };
-    let level =
-        (bg + cfg.peak_fraction * strength).max(high + cfg.peak_fraction * (peak - high)).min(bg + 0.5 * strength);
+    let (ll, rr) = (l.saturating_sub(2), r + 2);
+    let mut stepped = false;
+    if at(ll) > level || at(rr) > level {
+        let shoulder = at(ll).min(at(ll.saturating_sub(1))).max(at(rr).min(at(rr + 1)));
+        stepped = shoulder - high > floor;
+        if stepped {
+            level = level.max(shoulder + cfg.peak_fraction * (peak - shoulder));
+        }
+    }
     let cog = |p: &[S]| center_of_gravity(p, m, level, max_hw);
     let mut fit = None;
     let pos = if !saturated && width < cfg.narrow_width_px {
