@@ -737,11 +737,9 @@ fn judge<S: Sample>(
     // The centre's samples: above `peak_fraction` of the peak over the higher flank, so that on
     // a step (a bright face on one side) the run does not spill into the face; at most half the
     // peak over the background, so that the run is never empty.
-    let level_over = |high: f32| {
-        (bg + cfg.peak_fraction * strength).max(high + cfg.peak_fraction * (peak - high)).min(bg + 0.5 * strength)
-    };
     let high = f.left.0.max(f.right.0);
-    let mut level = level_over(high);
+    let mut level =
+        (bg + cfg.peak_fraction * strength).max(high + cfg.peak_fraction * (peak - high)).min(bg + 0.5 * strength);
     // A bright face may also end before the flank does (a highlight beside the line, whose
     // flank then reads the darker surface beyond it), and the run spill onto it: the lower of
     // the two samples two and three beyond the half-maximum run stands for the face on each
