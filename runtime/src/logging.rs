@@ -83,15 +83,17 @@ impl log::Log for Logger {
     }
     fn log(&self, r: &log::Record<'_>) {
         if self.enabled(r.metadata()) {
-            let mut msg = r.args().to_string();
-            if !r.target().starts_with("xsurf") {
-                let source = (r.module_path_static(), r.line());
+            // A record held back is dropped before it is formatted.
+            let held = if r.target().starts_with("xsurf") {
+                0
+            } else {
                 let Ok(mut repeats) = self.repeats.lock() else { return };
-                match repeats.admit(source, Instant::now()) {
-                    None => return,
-                    Some(0) => {}
-                    Some(held) => msg.push_str(&format!(" ({held} more from the same place not shown)")),
-                }
+                let Some(held) = repeats.admit((r.module_path_static(), r.line()), Instant::now()) else { return };
+                held
+            };
+            let mut msg = r.args().to_string();
+            if held > 0 {
+                msg.push_str(&format!(" ({held} more from the same place not shown)"));
             }
             eprintln!("[{}] [{}]: {msg}", r.level(), r.target());
             if r.level() <= log::Level::Info && r.target().starts_with("xsurf") {
