@@ -1020,7 +1020,14 @@ impl Reader {
             let mut missing_frags = this.missing_frags_for(writer_guid, sn);
             let first_missing = missing_frags.next();
             if let Some(first) = first_missing {
-              let missing_frags_set = iter::once(first).chain(missing_frags).collect(); // "undo" the .next() above
+              // xsurf patch (see XSURF-PATCH.md): a NACK_FRAG names at most 256
+              // fragments from its first; the rest are asked for in the next one.
+              // Upstream collected every missing fragment and logged an error
+              // for each NACK_FRAG it then truncated.
+              let last = FragmentNumber::new(u32::from(first) + 255);
+              let missing_frags_set = iter::once(first) // "undo" the .next() above
+                .chain(missing_frags.take_while(|f| *f <= last))
+                .collect();
               let nf = NackFrag {
                 reader_id,
                 writer_id: writer_proxy.remote_writer_guid.entity_id,
