@@ -10,6 +10,9 @@
 # usage: bash scripts/bench-merge.sh [SCANS] [SIZE] [MODES]
 #   SCANS: scans per mode (default 10); SIZE: 640x480 (default) or 1920x1200;
 #   MODES: "separate composed" (default both)
+# The peer runs with Cyclone DDS's defaults; CYCLONEDDS_URI in the environment configures it (for
+# instance a larger SocketReceiveBufferSize, as BENCHMARKS.md measured). The graph's nodes do not
+# read it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scans=${1:-10}
