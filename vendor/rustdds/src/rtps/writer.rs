@@ -1624,9 +1624,8 @@ impl Writer {
       if let Some(src_ts) = cache_change.write_options.source_timestamp() {
         message_builder = message_builder.ts_msg(self.endianness, Some(src_ts));
       }
-      let fragment_size = FRAGMENT_SIZE as u16;
       let data_size = cache_change.data_value.payload_size();
-      let (num_frags, _) = self.num_frags_and_frag_size(data_size);
+      let (num_frags, fragment_size) = self.num_frags_and_frag_size(data_size);
       // The run of consecutive requested fragments from `first`, as many as one
       // datagram holds.
       let fits = frags_per_datafrag(
