@@ -1,6 +1,6 @@
 //! The scanner's lasers from a node's parameters (the spec's "Several laser planes"): the list
-//! `lasers` and, per name, `laser.<name>.plane` (double[4], nx ny nz d in `carm`, unit normal),
-//! `laser.<name>.source` (double[3], in `carm`) and `laser.<name>.channel` (red, green or blue),
+//! `lasers` and, per name, `laser.<name>.plane` (`double[4]`, nx ny nz d in `carm`, unit normal),
+//! `laser.<name>.source` (`double[3]`, in `carm`) and `laser.<name>.channel` (red, green or blue),
 //! as nav2 declares its plugin lists. Every node that needs them (camera_driver, edge_detector,
 //! triangulator, mesher, merger) declares `lasers`; the per-laser names follow from it and are
 //! read here, checked once (`core::rig::validate_lasers`), with errors that name the parameter.

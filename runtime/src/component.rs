@@ -298,6 +298,11 @@ pub trait Component: Send + 'static {
     }
     /// No more input is coming (end of a bag, or shutdown): flush what is pending.
     fn finish(&mut self, _out: &mut Outbox<Self::Input, Self::Output>) {}
+    /// After every node of the graph has been told to [`finish`](Component::finish): wait for
+    /// work the node still has on threads of its own (a scan's mesh being made) and publish it.
+    /// So one node's finishing work runs beside the next nodes' (offline, where one thread
+    /// finishes them in turn).
+    fn settle(&mut self, _out: &mut Outbox<Self::Input, Self::Output>) {}
     /// True for a node whose work is bulk (meshing, merging, overlays) rather than on the path
     /// from a frame to its profile: the live host runs it, and the publishers of its outputs,
     /// at a lower CPU priority, so that on a loaded machine the cameras' chain goes first.
@@ -338,6 +343,8 @@ pub trait AnyComponent: Send {
     fn next_tick_ns(&self) -> Option<i64>;
     /// See [`Component::finish`].
     fn finish(&mut self, out: &mut Outbox);
+    /// See [`Component::settle`].
+    fn settle(&mut self, out: &mut Outbox);
     /// See [`Component::bulk`].
     fn bulk(&self) -> bool;
     /// See [`Component::counters`].
@@ -427,6 +434,11 @@ impl<C: Component> AnyComponent for Numbered<C> {
     fn finish(&mut self, out: &mut Outbox) {
         let mut typed = Outbox::default();
         self.inner.finish(&mut typed);
+        self.numbered(typed, out);
+    }
+    fn settle(&mut self, out: &mut Outbox) {
+        let mut typed = Outbox::default();
+        self.inner.settle(&mut typed);
         self.numbered(typed, out);
     }
     fn bulk(&self) -> bool {

@@ -100,6 +100,14 @@ impl Placed {
         self.take_refusals(&mut out);
         out
     }
+    /// Waits for the component's work on threads of its own, after every node's finish (see
+    /// [`Component::settle`](crate::component::Component::settle)); returns what it published.
+    pub fn settle(&mut self) -> Outbox {
+        let mut out = Outbox::default();
+        self.component.settle(&mut out);
+        self.take_refusals(&mut out);
+        out
+    }
 }
 
 /// True for a topic that ROS lets many nodes publish: `/tf`, `/tf_static` and the scan events
@@ -269,10 +277,17 @@ impl Router {
             }
         }
     }
-    /// Tells every node, in the order they were added, that no more input is coming.
+    /// Tells every node, in the order they were added, that no more input is coming; then,
+    /// in the same order, waits for each node's work on threads of its own
+    /// ([`Component::settle`](crate::component::Component::settle)).
     pub fn finish(&mut self) {
         for i in 0..self.nodes.len() {
             let out = self.nodes[i].finish();
+            self.deliver(i, out);
+            self.drain();
+        }
+        for i in 0..self.nodes.len() {
+            let out = self.nodes[i].settle();
             self.deliver(i, out);
             self.drain();
         }

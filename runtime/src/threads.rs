@@ -194,6 +194,9 @@ impl Runner {
                 *finished = true;
                 let out = self.placed.finish();
                 self.publish(out);
+                // Each node has a thread of its own here: nothing to overlap by waiting later.
+                let out = self.placed.settle();
+                self.publish(out);
                 let _ = ack.send(());
             }
             Work::Stop => return false,

@@ -3,7 +3,10 @@
 //! runs, `mesh` also carries the growing surface at `mesh_rate_hz`: each part holds only the
 //! triangles of the frames since the last part (`core::mesh::mesh_grid_frames`), as a marker
 //! of its own in namespace `<cam>_growing` that a viewer keeps; at END a DELETEALL clears them
-//! and the scan's cleaned, smoothed mesh follows.
+//! and the scan's cleaned, smoothed mesh follows. At END the report and the final cloud go
+//! first; the mesh, its markers and the PLY file are made on a thread of their own and
+//! published at the next tick after they are done (offline, at [`Component::settle`], so that
+//! the merge runs beside them).
 //!
 //! Scans are bounded by `/scan/events` from whoever publishes them: frames outside START..END
 //! belong to no scan (counted; a frame stamped before START that arrives after it as well). A
@@ -232,6 +235,8 @@ pub struct MesherNode {
     /// The growing surface: the first frame whose cells are not yet published, the parts
     /// published in this scan, and the stamp of the last one.
     growing: Growing,
+    /// The last closed scan, while its mesh is made on a thread of its own.
+    meshing: Option<(ScanMeta, Meshing)>,
 }
 
 /// The growing surface of a scan (`mesh_rate_hz`).
@@ -275,6 +280,9 @@ pub enum Output {
 }
 
 type Out = Outbox<Input, Output>;
+/// How often a node whose closed scan's mesh is being made looks whether it is done.
+const MESH_POLL_NS: i64 = 2_000_000;
+
 /// Longest run of empty columns inserted for a stamp gap.
 const MAX_GAP_COLUMNS: u32 = 300;
 
@@ -318,6 +326,7 @@ impl MesherNode {
             points_rejected: 0,
             account: ScanAccount::default(),
             growing: Growing::default(),
+            meshing: None,
         })
     }
 
@@ -414,6 +423,7 @@ impl MesherNode {
         if !self.active {
             return;
         }
+        self.mesh_done(true, out);
         // One grid per laser, cleaned and meshed apart; the cloud stacks them again.
         let mut blocks = self.grid.blocks(self.cfg.lasers());
         let rejected: usize = blocks.iter_mut().map(|b| b.clean(&self.cfg.mesh).rejected).sum();
@@ -425,10 +435,146 @@ impl MesherNode {
         out.publish(Output::Report, Msg::Text(Arc::new(StringMsg { data: report })));
         self.active = false;
         self.scans += 1;
-        let meshes: Vec<Mesh> = blocks.iter().map(|b| mesh_grid(b, &self.cfg.mesh)).collect();
-        let grid = Grid::stacked(blocks);
-        // The camera's mesh; with lasers, also each laser's.
-        let (mesh, per_laser) = if self.cfg.laser_names.is_empty() {
+        // The final cloud first (the merger waits for it); the mesh, its markers and the PLY
+        // file follow from a thread of their own, published by the first tick after they are
+        // made (see `mesh_done`).
+        let grid = Grid::stacked(blocks.clone());
+        let header = convert::header(stamp, &self.cfg.frame_id);
+        out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_lasers(&grid, header.clone(), self.cfg.lasers()))));
+        let scan = ScanMeta {
+            scan_id: self.scan_id,
+            aborted,
+            frames: grid.frames(),
+            points: grid.valid(),
+            clear_growing: std::mem::take(&mut self.growing).parts > 0,
+        };
+        let job = MeshJob {
+            blocks,
+            mesh: self.cfg.mesh,
+            camera: self.camera.clone(),
+            laser_names: self.cfg.laser_names.clone(),
+            header,
+            file: (scan.points > 0).then(|| self.cfg.output_dir.clone()).flatten().map(|dir| {
+                let dir = dir.join(format!("scan_{}{}", scan.scan_id, if aborted { "_aborted" } else { "" }));
+                dir.join(format!("{}.ply", if self.camera.is_empty() { "camera" } else { &self.camera }))
+            }),
+            id: scan.scan_id as i32,
+        };
+        // The job stays here until the thread takes it, so that it is not lost where no thread
+        // can be started.
+        let slot = Arc::new(std::sync::Mutex::new(Some(job)));
+        let theirs = slot.clone();
+        let spawned = std::thread::Builder::new().name(format!("{}-mesh", self.camera)).spawn(move || {
+            xsurf_runtime::threads::lower_this_thread();
+            let job = theirs.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take();
+            job.map(MeshJob::run)
+        });
+        let meshing = match spawned {
+            Ok(handle) => Meshing::Thread(handle),
+            Err(e) => {
+                // No thread to be had: the mesh is made here.
+                log::warn!("{}: no thread for the mesh ({e}); made on the node's own", self.camera);
+                let job = slot.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take();
+                Meshing::Done(Box::new(job.map(MeshJob::run)))
+            }
+        };
+        self.meshing = Some((scan, meshing));
+        self.mesh_done(false, out);
+    }
+
+    /// Publishes the closed scan's mesh once it is made (with `wait`, waits for it): the
+    /// DELETEALL of its growing parts, its markers; counts it and logs the scan.
+    fn mesh_done(&mut self, wait: bool, out: &mut Out) {
+        let Some((scan, meshing)) = self.meshing.take() else { return };
+        let made = match meshing {
+            Meshing::Thread(h) if !wait && !h.is_finished() => {
+                self.meshing = Some((scan, Meshing::Thread(h)));
+                return;
+            }
+            Meshing::Thread(h) => h.join().ok().flatten(),
+            Meshing::Done(made) => *made,
+        };
+        let Some(made) = made else {
+            log::error!("{}: scan {}: the mesh's thread failed; no mesh", self.camera, scan.scan_id);
+            return;
+        };
+        if scan.clear_growing {
+            // The growing parts go; the scan's mesh takes their place.
+            let clear = Marker { header: made.header.clone(), action: Marker::DELETEALL, ..Default::default() };
+            out.publish(Output::Mesh, Msg::Marker(Arc::new(clear)));
+        }
+        for (port, m) in &made.markers {
+            out.publish(*port, m.clone());
+        }
+        self.last_mesh.set(made.markers);
+        self.triangles += made.triangles as u64;
+        self.mesh_points += made.vertices as u64;
+        if scan.points == 0 {
+            log::warn!("{}: scan {} has no points; nothing written", self.camera, scan.scan_id);
+            return;
+        }
+        match made.file {
+            Some(Ok(())) => self.files_written += 1,
+            Some(Err(e)) => log::error!("{}: {e}", self.camera),
+            None => {}
+        }
+        log::info!(
+            "{}: scan {} {}: {} frames, {} points in the grid, {} in the surface ({} triangles)",
+            self.camera,
+            scan.scan_id,
+            if scan.aborted { "aborted" } else { "ended" },
+            scan.frames,
+            scan.points,
+            made.vertices,
+            made.triangles
+        );
+    }
+}
+
+/// A closed scan, while its mesh is being made.
+struct ScanMeta {
+    scan_id: u32,
+    aborted: bool,
+    frames: usize,
+    /// Points in its final grid.
+    points: usize,
+    /// It published growing parts, which its mesh replaces.
+    clear_growing: bool,
+}
+
+/// A closed scan's mesh: being made on its thread, or made.
+enum Meshing {
+    Thread(std::thread::JoinHandle<Option<MeshMade>>),
+    Done(Box<Option<MeshMade>>),
+}
+
+/// What a closed scan's mesh needs: its cleaned grids (one per laser), and where it goes.
+struct MeshJob {
+    blocks: Vec<Grid>,
+    mesh: MeshConfig,
+    camera: String,
+    laser_names: Vec<String>,
+    header: xsurf_msgs::std_msgs::Header,
+    /// The PLY file to write (`None`: no output folder, or no points).
+    file: Option<PathBuf>,
+    id: i32,
+}
+
+/// A closed scan's mesh, made: its markers, its size, and the PLY file written (or why not).
+struct MeshMade {
+    header: xsurf_msgs::std_msgs::Header,
+    markers: Vec<(Output, Msg)>,
+    triangles: usize,
+    vertices: usize,
+    file: Option<Result<(), String>>,
+}
+
+impl MeshJob {
+    /// Meshes each laser's grid; one marker for the camera, or with lasers one per laser in
+    /// namespace `<camera>.<laser>`; writes the camera's PLY file (all lasers).
+    fn run(self) -> MeshMade {
+        let meshes: Vec<Mesh> = self.blocks.iter().map(|b| mesh_grid(b, &self.mesh)).collect();
+        let (mesh, per_laser) = if self.laser_names.is_empty() {
             (meshes.into_iter().next().unwrap_or_default(), Vec::new())
         } else {
             let all = meshes.iter().fold(Mesh::default(), |mut m, b| {
@@ -437,59 +583,27 @@ impl MesherNode {
             });
             (all, meshes)
         };
-        self.triangles += mesh.triangles.len() as u64;
-        self.mesh_points += mesh.positions.len() as u64;
-        let header = convert::header(stamp, &self.cfg.frame_id);
-        out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_lasers(&grid, header.clone(), self.cfg.lasers()))));
-        if self.growing.parts > 0 {
-            // The growing parts go; the scan's mesh takes their place.
-            let clear = Marker { header: header.clone(), action: Marker::DELETEALL, ..Default::default() };
-            out.publish(Output::Mesh, Msg::Marker(Arc::new(clear)));
-            self.growing = Growing::default();
-        }
-        // With lasers, each laser's mesh is a marker of its own, in namespace `<camera>.<laser>`.
-        let id = self.scan_id as i32;
+        let header = self.header;
         let markers: Vec<(Output, Msg)> = if per_laser.is_empty() {
-            vec![(Output::Mesh, Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header, &self.camera, id, 1.0))))]
+            vec![(Output::Mesh, Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header.clone(), &self.camera, self.id, 1.0))))]
         } else {
             per_laser
                 .iter()
-                .zip(&self.cfg.laser_names)
+                .zip(&self.laser_names)
                 .map(|(m, l)| {
                     let ns = format!("{}.{l}", self.camera);
-                    (Output::Mesh, Msg::Marker(Arc::new(convert::mesh_marker(m, header.clone(), &ns, id, 1.0))))
+                    (Output::Mesh, Msg::Marker(Arc::new(convert::mesh_marker(m, header.clone(), &ns, self.id, 1.0))))
                 })
                 .collect()
         };
-        for (port, m) in &markers {
-            out.publish(*port, m.clone());
-        }
-        self.last_mesh.set(markers);
-        if grid.valid() == 0 {
-            log::warn!("{}: scan {} has no points; nothing written", self.camera, self.scan_id);
-            return;
-        }
-        if let Some(dir) = &self.cfg.output_dir {
-            let dir = dir.join(format!("scan_{}{}", self.scan_id, if aborted { "_aborted" } else { "" }));
-            let path = dir.join(format!("{}.ply", if self.camera.is_empty() { "camera" } else { &self.camera }));
-            let r = std::fs::create_dir_all(&dir)
+        let file = self.file.map(|path| {
+            let dir = path.parent().map(std::path::Path::to_path_buf).unwrap_or_default();
+            std::fs::create_dir_all(&dir)
                 .map_err(|e| e.to_string())
-                .and_then(|_| xsurf_formats::ply::write_file(&path, &mesh).map_err(|e| e.to_string()));
-            match r {
-                Ok(()) => self.files_written += 1,
-                Err(e) => log::error!("{}: cannot write {}: {e}", self.camera, path.display()),
-            }
-        }
-        log::info!(
-            "{}: scan {} {}: {} frames, {} points in the grid, {} in the surface ({} triangles)",
-            self.camera,
-            self.scan_id,
-            if aborted { "aborted" } else { "ended" },
-            grid.frames(),
-            grid.valid(),
-            mesh.positions.len(),
-            mesh.triangles.len()
-        );
+                .and_then(|_| xsurf_formats::ply::write_file(&path, &mesh).map_err(|e| e.to_string()))
+                .map_err(|e| format!("cannot write {}: {e}", path.display()))
+        });
+        MeshMade { header, markers, triangles: mesh.triangles.len(), vertices: mesh.positions.len(), file }
     }
 }
 
@@ -550,6 +664,8 @@ impl MesherNode {
             ScanEvent::START => {
                 self.close_pending(out);
                 self.close(false, None, out);
+                // The last scan's mesh goes out before this scan's first part.
+                self.mesh_done(true, out);
                 self.last_mesh.clear();
                 let start = e.header.stamp.nanos();
                 self.start(e.scan_id, Some(start));
@@ -637,13 +753,21 @@ impl Component for MesherNode {
         if self.closing.is_some_and(|(_, end)| now_ns >= end.saturating_add(self.cfg.end_grace_ns)) {
             self.close_pending(out);
         }
+        self.mesh_done(false, out);
         self.last_mesh.tick(self.cfg.republish_ns, now_ns, out);
+    }
+    /// While a closed scan's mesh is being made: soon, to publish it once made.
+    fn next_tick_ns(&self) -> Option<i64> {
+        self.meshing.as_ref().map(|_| xsurf_runtime::wall_clock_ns() + MESH_POLL_NS)
     }
     fn finish(&mut self, out: &mut Out) {
         self.outside_scan += self.early.len() as u64;
         self.early.clear();
         self.close_pending(out);
         self.close(false, None, out);
+    }
+    fn settle(&mut self, out: &mut Out) {
+        self.mesh_done(true, out);
     }
     /// Bulk work: the live host runs it behind the frame path.
     fn bulk(&self) -> bool {
@@ -837,7 +961,14 @@ mod tests {
         out.items.clear();
         m.handle(Input::Events, &event(ScanEvent::END, 3), &mut out).unwrap();
         m.finish(&mut out);
+        m.settle(&mut out);
         let after = markers(&out);
+        // The final cloud goes first: the mesh is made after it, on a thread of its own.
+        let first = |f: &dyn Fn(&(Output, Msg)) -> bool| out.items.iter().position(f).unwrap();
+        assert!(
+            first(&|(p, m)| *p == Output::Cloud && matches!(m, Msg::Cloud(_)))
+                < first(&|(p, m)| *p == Output::Mesh && matches!(m, Msg::Marker(_)))
+        );
         assert_eq!(after.len(), 2);
         assert_eq!(after[0].action, Marker::DELETEALL);
         assert_eq!((after[1].ns.as_str(), after[1].id, after[1].points.len() / 3), ("cam1", 2, 2 * 39 * (frames as usize - 1)));
