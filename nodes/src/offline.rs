@@ -706,6 +706,8 @@ pub fn reconstruct(opts: &Options) -> anyhow::Result<Report> {
     clear_outputs(&opts.out, &topics.cameras)?;
     let ros = ros_args(opts)?;
     let (mut router, xray_error) = build_graph(&topics, &ros, opts)?;
+    // Nothing outside the graph reads it: what no node takes (the meshes' markers) is not built.
+    router.quiet_unheard();
     let mut replay = Replay::new(&mut router, topics.implicit_scan());
     let mut report = Report::start(opts, &topics, &bag, &replay);
     replay.run(&bag, opts, &mut report);

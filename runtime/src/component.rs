@@ -163,11 +163,27 @@ pub struct Outbox<I = usize, O = usize> {
     /// Earlier messages refused now: `(input, why)`. The host counts and logs each under its own
     /// input's topic, not the topic of the message being handled.
     pub refused: Vec<(I, NodeError)>,
+    /// Outputs that nothing takes (see [`Outbox::heard`]).
+    unheard: Vec<O>,
 }
 
 impl<I, O> Default for Outbox<I, O> {
     fn default() -> Self {
-        Outbox { items: Vec::new(), refused: Vec::new() }
+        Outbox { items: Vec::new(), refused: Vec::new(), unheard: Vec::new() }
+    }
+}
+
+impl<I, O: PartialEq> Outbox<I, O> {
+    /// An empty outbox whose host says that nothing takes the outputs `unheard` (offline, a
+    /// topic no node of the graph subscribes to).
+    pub fn unheard(unheard: Vec<O>) -> Self {
+        Outbox { items: Vec::new(), refused: Vec::new(), unheard }
+    }
+    /// False where the host knows that nothing takes output `port`: a component may then leave
+    /// out a message that is costly to build and that no one reads (a mesh's marker offline).
+    /// Live every output is heard (a DDS peer may subscribe at any time).
+    pub fn heard(&self, port: O) -> bool {
+        !self.unheard.contains(&port)
     }
 }
 
@@ -373,6 +389,10 @@ struct Numbered<C: Component> {
 }
 
 impl<C: Component> Numbered<C> {
+    /// The component's own outbox, with the outputs that the host's outbox says nothing takes.
+    fn typed(&self, out: &Outbox) -> Outbox<C::Input, C::Output> {
+        Outbox::unheard(out.unheard.iter().filter_map(|&k| self.outputs.get(k).copied()).collect())
+    }
     /// The component's outbox as positions. An output the component never listed (a bug in the
     /// component) is logged and dropped; so is a refusal of an input it never listed.
     fn numbered(&self, typed: Outbox<C::Input, C::Output>, out: &mut Outbox) {
@@ -418,13 +438,13 @@ impl<C: Component> AnyComponent for Numbered<C> {
                 got: msg.type_name(),
             });
         }
-        let mut typed = Outbox::default();
+        let mut typed = self.typed(out);
         let r = self.inner.handle(id, msg, &mut typed);
         self.numbered(typed, out);
         r
     }
     fn tick(&mut self, now_ns: i64, out: &mut Outbox) {
-        let mut typed = Outbox::default();
+        let mut typed = self.typed(out);
         self.inner.tick(now_ns, &mut typed);
         self.numbered(typed, out);
     }
@@ -432,12 +452,12 @@ impl<C: Component> AnyComponent for Numbered<C> {
         self.inner.next_tick_ns()
     }
     fn finish(&mut self, out: &mut Outbox) {
-        let mut typed = Outbox::default();
+        let mut typed = self.typed(out);
         self.inner.finish(&mut typed);
         self.numbered(typed, out);
     }
     fn settle(&mut self, out: &mut Outbox) {
-        let mut typed = Outbox::default();
+        let mut typed = self.typed(out);
         self.inner.settle(&mut typed);
         self.numbered(typed, out);
     }

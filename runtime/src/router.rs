@@ -36,6 +36,8 @@ pub struct Placed {
     pub last_error: Option<String>,
     /// Refusals logged (each different from the one before).
     logged: u64,
+    /// Its outputs that nothing takes (see [`Router::quiet_unheard`]).
+    unheard: Vec<usize>,
 }
 
 impl Placed {
@@ -47,7 +49,7 @@ impl Placed {
     /// (the first few; all are counted and the last is kept for reports). Returns what it
     /// published.
     pub fn handle(&mut self, input: usize, msg: &Msg) -> Outbox {
-        let mut out = Outbox::default();
+        let mut out = Outbox::unheard(self.unheard.clone());
         self.handled += 1;
         let t0 = std::time::Instant::now();
         let r = self.component.handle(input, msg, &mut out);
@@ -84,7 +86,7 @@ impl Placed {
     }
     /// Ticks the component (timed); returns what it published.
     pub fn tick(&mut self, now_ns: i64) -> Outbox {
-        let mut out = Outbox::default();
+        let mut out = Outbox::unheard(self.unheard.clone());
         let t0 = std::time::Instant::now();
         self.component.tick(now_ns, &mut out);
         self.busy_ns += t0.elapsed().as_nanos() as u64;
@@ -93,7 +95,7 @@ impl Placed {
     }
     /// Tells the component no more input is coming (timed); returns what it published.
     pub fn finish(&mut self) -> Outbox {
-        let mut out = Outbox::default();
+        let mut out = Outbox::unheard(self.unheard.clone());
         let t0 = std::time::Instant::now();
         self.component.finish(&mut out);
         self.busy_ns += t0.elapsed().as_nanos() as u64;
@@ -103,7 +105,7 @@ impl Placed {
     /// Waits for the component's work on threads of its own, after every node's finish (see
     /// [`Component::settle`](crate::component::Component::settle)); returns what it published.
     pub fn settle(&mut self) -> Outbox {
-        let mut out = Outbox::default();
+        let mut out = Outbox::unheard(self.unheard.clone());
         self.component.settle(&mut out);
         self.take_refusals(&mut out);
         out
@@ -169,6 +171,7 @@ impl Router {
             busy_ns: 0,
             last_error: None,
             logged: 0,
+            unheard: Vec::new(),
         });
         idx
     }
@@ -188,6 +191,14 @@ impl Router {
     /// A node, mutably (to reconfigure it).
     pub fn node_mut(&mut self, idx: usize) -> Option<&mut Placed> {
         self.nodes.get_mut(idx)
+    }
+    /// Tells every node which of its outputs no node of the graph subscribes to
+    /// ([`Outbox::heard`](crate::component::Outbox::heard)), so that it may leave them out: for a
+    /// graph that has no tap and no outside subscriber (offline).
+    pub fn quiet_unheard(&mut self) {
+        for n in &mut self.nodes {
+            n.unheard = (0..n.outputs.len()).filter(|&k| !self.subs.contains_key(&n.outputs[k].1)).collect();
+        }
     }
     /// True if any node subscribes to `topic`.
     pub fn has_subscriber(&self, topic: &str) -> bool {
@@ -352,6 +363,52 @@ mod tests {
                 out.publish(0, image(if self.out == "/a" { 1 } else { 2 }));
             }
         }
+    }
+
+    /// Records at each tick whether its output is heard.
+    struct Listener {
+        out: &'static str,
+        heard: Arc<Mutex<Vec<bool>>>,
+    }
+    impl Component for Listener {
+        type Input = usize;
+        type Output = usize;
+        fn node_name(&self) -> &'static str {
+            "l"
+        }
+        fn inputs(&self) -> Vec<(usize, Port)> {
+            Vec::new()
+        }
+        fn outputs(&self) -> Vec<(usize, Port)> {
+            vec![(0, Port::new(self.out, Image::TYPE_NAME, QosClass::Reliable))]
+        }
+        fn reconfigure(&mut self, _: &Params) -> Result<(), ParamError> {
+            Ok(())
+        }
+        fn handle(&mut self, _: usize, _: &Msg, _: &mut Outbox) -> Result<(), NodeError> {
+            Ok(())
+        }
+        fn tick(&mut self, _: i64, out: &mut Outbox) {
+            self.heard.lock().unwrap().push(out.heard(0));
+        }
+    }
+
+    #[test]
+    fn outputs_no_node_takes_are_unheard_once_the_graph_says_so() {
+        let heard = Arc::new(Mutex::new(Vec::new()));
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let mut r = Router::new();
+        let listener = |out| crate::component::boxed(Listener { out, heard: heard.clone() });
+        r.add(listener("/taken"), "a", "/", &[]);
+        r.add(listener("/nobody"), "b", "/", &[]);
+        r.add(crate::component::boxed(Node { input: Some("/taken"), out: "/c", seen }), "c", "/", &[]);
+        // Until the graph is told it has no outside subscriber, every output is heard.
+        r.tick(0);
+        assert_eq!(*heard.lock().unwrap(), [true, true]);
+        heard.lock().unwrap().clear();
+        r.quiet_unheard();
+        r.tick(1);
+        assert_eq!(*heard.lock().unwrap(), [true, false]);
     }
 
     #[test]

@@ -374,29 +374,32 @@ impl MergerNode {
             let col = merged.colors.get(c).copied().unwrap_or([200; 3]);
             (pts[c], 0.0, (u32::from(col[0]) << 16) | (u32::from(col[1]) << 8) | u32::from(col[2]))
         };
-        let cloud = if lasers.is_empty() {
-            pointcloud::build(header.clone(), 1, pts.len() as u32, |_, c| point(c))
-        } else {
-            // Each vertex's laser: its grid's, grids being camera-major, laser-minor.
-            pointcloud::build_with_laser(header.clone(), 1, pts.len() as u32, |_, c| {
-                let (p, i, rgb) = point(c);
-                (p, i, rgb, vertex_grid.get(c).map_or(0.0, |&g| (usize::from(g) % lasers.len()) as f32))
-            })
-        };
         self.merges += 1;
         self.points += pts.len() as u64;
         self.triangles += merged.triangles.len() as u64;
-        let cloud = Msg::Cloud(Arc::new(cloud));
-        let marker = Msg::Marker(Arc::new(convert::mesh_marker(
-            &merged,
-            header,
-            "surface",
-            self.scan_id as i32,
-            1.0 - self.cfg.transparency,
-        )));
-        out.publish(Output::Cloud, cloud.clone());
-        out.publish(Output::Mesh, marker.clone());
-        self.last_outputs.set(vec![(Output::Cloud, cloud), (Output::Mesh, marker)]);
+        // What no one takes (offline) is not built: the marker is some 40 bytes a vertex.
+        let mut outputs = Vec::new();
+        if out.heard(Output::Cloud) {
+            let cloud = if lasers.is_empty() {
+                pointcloud::build(header.clone(), 1, pts.len() as u32, |_, c| point(c))
+            } else {
+                // Each vertex's laser: its grid's, grids being camera-major, laser-minor.
+                pointcloud::build_with_laser(header.clone(), 1, pts.len() as u32, |_, c| {
+                    let (p, i, rgb) = point(c);
+                    (p, i, rgb, vertex_grid.get(c).map_or(0.0, |&g| (usize::from(g) % lasers.len()) as f32))
+                })
+            };
+            outputs.push((Output::Cloud, Msg::Cloud(Arc::new(cloud))));
+        }
+        if out.heard(Output::Mesh) {
+            let alpha = 1.0 - self.cfg.transparency;
+            let marker = convert::mesh_marker(&merged, header, "surface", self.scan_id as i32, alpha);
+            outputs.push((Output::Mesh, Msg::Marker(Arc::new(marker))));
+        }
+        for (port, msg) in &outputs {
+            out.publish(*port, msg.clone());
+        }
+        self.last_outputs.set(outputs);
         let start_ns = self.scan_start_ns.unwrap_or(stamp);
         let end_ns = self.scan_end_ns.filter(|&e| e >= start_ns).unwrap_or(stamp);
         let span = dicom::ScanSpan { scan_id: self.scan_id, start_ns, end_ns };

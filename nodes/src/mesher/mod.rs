@@ -459,6 +459,7 @@ impl MesherNode {
                 dir.join(format!("{}.ply", if self.camera.is_empty() { "camera" } else { &self.camera }))
             }),
             id: scan.scan_id as i32,
+            markers: out.heard(Output::Mesh),
         };
         // The job stays here until the thread takes it, so that it is not lost where no thread
         // can be started.
@@ -558,6 +559,8 @@ struct MeshJob {
     /// The PLY file to write (`None`: no output folder, or no points).
     file: Option<PathBuf>,
     id: i32,
+    /// Markers are made (something takes them).
+    markers: bool,
 }
 
 /// A closed scan's mesh, made: its markers, its size, and the PLY file written (or why not).
@@ -584,7 +587,9 @@ impl MeshJob {
             (all, meshes)
         };
         let header = self.header;
-        let markers: Vec<(Output, Msg)> = if per_laser.is_empty() {
+        let markers: Vec<(Output, Msg)> = if !self.markers {
+            Vec::new()
+        } else if per_laser.is_empty() {
             vec![(Output::Mesh, Msg::Marker(Arc::new(convert::mesh_marker(&mesh, header.clone(), &self.camera, self.id, 1.0))))]
         } else {
             per_laser
