@@ -40,17 +40,27 @@ pub const INBOX_WAIT: Duration = Duration::from_secs(2);
 /// their publishers.
 pub const BULK_NICE: i32 = 10;
 
+/// The nice value of work that no one waits for, beside the bulk nodes (a mesher's mesh, made
+/// after its final cloud has gone to the merger, which is waited for).
+pub const BACKGROUND_NICE: i32 = 19;
+
 /// Lowers the calling thread's CPU priority to [`BULK_NICE`] (Linux keeps a nice value per
 /// thread), never raising it. Lowering needs no privilege; a failure is logged and the thread
 /// goes on as it was.
 pub fn lower_this_thread() {
+    lower_this_thread_to(BULK_NICE);
+}
+
+/// Lowers the calling thread's CPU priority to `nice`, never raising it (see
+/// [`lower_this_thread`]).
+pub fn lower_this_thread_to(nice: i32) {
     let tid = rustix::thread::gettid();
     let now = rustix::process::getpriority_process(Some(tid)).unwrap_or(0);
-    if now >= BULK_NICE {
+    if now >= nice {
         return;
     }
-    if let Err(e) = rustix::process::setpriority_process(Some(tid), BULK_NICE) {
-        log::debug!("thread {tid:?}: nice {BULK_NICE} not set: {e}");
+    if let Err(e) = rustix::process::setpriority_process(Some(tid), nice) {
+        log::debug!("thread {tid:?}: nice {nice} not set: {e}");
     }
 }
 

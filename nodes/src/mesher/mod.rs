@@ -466,7 +466,8 @@ impl MesherNode {
         let slot = Arc::new(std::sync::Mutex::new(Some(job)));
         let theirs = slot.clone();
         let spawned = std::thread::Builder::new().name(format!("{}-mesh", self.camera)).spawn(move || {
-            xsurf_runtime::threads::lower_this_thread();
+            // Below the merger, which waits for the cloud that has gone, not for this.
+            xsurf_runtime::threads::lower_this_thread_to(xsurf_runtime::threads::BACKGROUND_NICE);
             let job = theirs.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take();
             job.map(MeshJob::run)
         });
