@@ -30,6 +30,43 @@ fn finish<R, F: FnOnce() -> R>(handle: Option<ScopedJoinHandle<'_, Option<R>>>, 
     handle.and_then(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).or_else(|| take(slot).map(|f| f()))
 }
 
+/// Work started on a thread of its own by [`background`], or done already where no thread could
+/// be started.
+pub enum Background<R> {
+    /// On its thread (its result `None` if the thread failed).
+    Thread(std::thread::JoinHandle<Option<R>>),
+    /// Done here (`None` only if the work was gone from its slot).
+    Done(Option<R>),
+}
+
+impl<R> Background<R> {
+    /// True once the result can be taken without waiting.
+    pub fn is_finished(&self) -> bool {
+        match self {
+            Background::Thread(h) => h.is_finished(),
+            Background::Done(_) => true,
+        }
+    }
+    /// The result, waiting for it; `None` where its thread failed.
+    pub fn join(self) -> Option<R> {
+        match self {
+            Background::Thread(h) => h.join().ok().flatten(),
+            Background::Done(r) => r,
+        }
+    }
+}
+
+/// Runs `f` on a thread named `name` that outlives the caller's scope, or here where no thread
+/// can be started (the work is kept in a slot until the thread takes it, so it is never lost).
+pub fn background<R: Send + 'static>(name: String, f: impl FnOnce() -> R + Send + 'static) -> Background<R> {
+    let slot = std::sync::Arc::new(Mutex::new(Some(f)));
+    let theirs = slot.clone();
+    match std::thread::Builder::new().name(name).spawn(move || take(&theirs).map(|f| f())) {
+        Ok(h) => Background::Thread(h),
+        Err(_) => Background::Done(take(&slot).map(|f| f())),
+    }
+}
+
 /// Runs `a` here and `b` on a thread of its own, side by side (one after the other on one
 /// core, or where no thread can be started). A panic in either is raised here.
 pub fn join<A, B: Send>(a: impl FnOnce() -> A, b: impl FnOnce() -> B + Send) -> (A, B) {

@@ -236,7 +236,7 @@ pub struct MesherNode {
     /// published in this scan, and the stamp of the last one.
     growing: Growing,
     /// The last closed scan, while its mesh is made on a thread of its own.
-    meshing: Option<(ScanMeta, Meshing)>,
+    meshing: Option<(ScanMeta, xsurf_core::par::Background<MeshMade>)>,
 }
 
 /// The growing surface of a scan (`mesh_rate_hz`).
@@ -461,25 +461,11 @@ impl MesherNode {
             id: scan.scan_id as i32,
             markers: out.heard(Output::Mesh),
         };
-        // The job stays here until the thread takes it, so that it is not lost where no thread
-        // can be started.
-        let slot = Arc::new(std::sync::Mutex::new(Some(job)));
-        let theirs = slot.clone();
-        let spawned = std::thread::Builder::new().name(format!("{}-mesh", self.camera)).spawn(move || {
+        let meshing = xsurf_core::par::background(format!("{}-mesh", self.camera), move || {
             // Below the merger, which waits for the cloud that has gone, not for this.
             xsurf_runtime::threads::lower_this_thread_to(xsurf_runtime::threads::BACKGROUND_NICE);
-            let job = theirs.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take();
-            job.map(MeshJob::run)
+            job.run()
         });
-        let meshing = match spawned {
-            Ok(handle) => Meshing::Thread(handle),
-            Err(e) => {
-                // No thread to be had: the mesh is made here.
-                log::warn!("{}: no thread for the mesh ({e}); made on the node's own", self.camera);
-                let job = slot.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take();
-                Meshing::Done(Box::new(job.map(MeshJob::run)))
-            }
-        };
         self.meshing = Some((scan, meshing));
         self.mesh_done(false, out);
     }
@@ -488,14 +474,11 @@ impl MesherNode {
     /// DELETEALL of its growing parts, its markers; counts it and logs the scan.
     fn mesh_done(&mut self, wait: bool, out: &mut Out) {
         let Some((scan, meshing)) = self.meshing.take() else { return };
-        let made = match meshing {
-            Meshing::Thread(h) if !wait && !h.is_finished() => {
-                self.meshing = Some((scan, Meshing::Thread(h)));
-                return;
-            }
-            Meshing::Thread(h) => h.join().ok().flatten(),
-            Meshing::Done(made) => *made,
-        };
+        if !wait && !meshing.is_finished() {
+            self.meshing = Some((scan, meshing));
+            return;
+        }
+        let made = meshing.join();
         let Some(made) = made else {
             log::error!("{}: scan {}: the mesh's thread failed; no mesh", self.camera, scan.scan_id);
             return;
@@ -542,12 +525,6 @@ struct ScanMeta {
     points: usize,
     /// It published growing parts, which its mesh replaces.
     clear_growing: bool,
-}
-
-/// A closed scan's mesh: being made on its thread, or made.
-enum Meshing {
-    Thread(std::thread::JoinHandle<Option<MeshMade>>),
-    Done(Box<Option<MeshMade>>),
 }
 
 /// What a closed scan's mesh needs: its cleaned grids (one per laser), and where it goes.
