@@ -932,8 +932,8 @@ fn files_under(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
 
 /// A disk that fills up during a reconstruction (a tmpfs just larger than the two cameras'
 /// surfaces): a clear error naming the file and the cause, exit 3, and every file that was
-/// written complete is kept, byte for byte as in a run with room; no partial or temporary file
-/// is left (issue 24, item 4).
+/// written complete is kept, byte for byte as in a run with room; each file that is not is named
+/// with the cause (`report.json` too); no partial or temporary file is left (issue 24, item 4).
 #[test]
 fn a_full_disk_is_a_clear_error_and_complete_files_are_kept() {
     let dir = scratch("full-disk");
@@ -956,10 +956,15 @@ fn a_full_disk_is_a_clear_error_and_complete_files_are_kept() {
     assert!(stdout.contains("exit 3"), "{stdout}\n{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(stderr.contains("No space left on device"), "{stderr}");
-    assert!(stderr.contains("could not be written (last: ") && stderr.contains(".ply: No space left"), "{stderr}");
+    assert!(stderr.contains("could not be written (last: "), "{stderr}");
+    // Which files find room depends on the order of the meshers' threads and the merger's
+    // lanes; whatever is kept is whole, and what is not is named.
     let kept = files_under(&dir.join("kept/o"));
-    assert!(kept.contains_key("cam1.ply") && kept.contains_key("cam2.ply"), "{:?}", kept.keys());
+    assert!(kept.keys().any(|k| k != "report.json"), "nothing kept: {:?}", kept.keys());
     assert!(kept.len() < reference.len(), "{:?}", kept.keys());
+    for name in reference.keys().filter(|n| !kept.contains_key(*n)) {
+        assert!(stderr.contains(&format!("{name}: No space left on device")), "{name} lost without a word: {stderr}");
+    }
     for (name, bytes) in &kept {
         let want = reference.get(name).unwrap_or_else(|| panic!("{name}: not a file of a complete run (left over?)"));
         if name != "report.json" {

@@ -109,6 +109,10 @@ pub struct Report {
     /// Per scan, each camera's frames: expected from the stamps, received, lost (with the gaps'
     /// times), without a line, refused; and the cameras missing from the merge.
     pub scan_reports: Vec<serde_json::Value>,
+    /// Why `report.json` itself could not be written (a full disk): a problem like any other
+    /// file's, printed and counted in the exit code, not an abort that hides the others.
+    #[serde(skip)]
+    pub report_error: Option<String>,
 }
 
 /// Peak resident set size of this process (Linux), bytes.
@@ -598,6 +602,7 @@ impl Report {
             files: Vec::new(),
             xray: None,
             scan_reports: Vec::new(),
+            report_error: None,
         }
     }
 
@@ -680,7 +685,10 @@ impl Report {
         self.files.push("report.json".into());
         self.peak_rss_bytes = peak_rss_bytes();
         let json = serde_json::to_string_pretty(&self)?;
-        xsurf_formats::write_bytes_atomic(&out.join("report.json"), json.as_bytes())?;
+        if let Err(e) = xsurf_formats::write_bytes_atomic(&out.join("report.json"), json.as_bytes()) {
+            self.files.retain(|f| f != "report.json");
+            self.report_error = Some(e.to_string());
+        }
         Ok(())
     }
 }
@@ -753,6 +761,9 @@ impl Report {
                 let last = n.problems.last().map_or_else(|| "see the log".to_string(), |p| format!("last: {p}"));
                 v.push(format!("{}: {k} file(s) could not be written ({last})", n.node));
             }
+        }
+        if let Some(e) = &self.report_error {
+            v.push(format!("report.json could not be written: {e}"));
         }
         v
     }
