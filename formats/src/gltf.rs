@@ -23,19 +23,33 @@ struct Builder {
 
 impl Builder {
     fn view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
+        self.view_with(target, |bin| bin.extend_from_slice(bytes))
+    }
+    /// A buffer view of the bytes `fill` appends to the binary buffer (written in place: a
+    /// full-body surface's arrays are tens of MB).
+    fn view_with(&mut self, target: Option<u32>, fill: impl FnOnce(&mut Vec<u8>)) -> usize {
         while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
-        let mut v = json!({"buffer": 0, "byteOffset": self.bin.len(), "byteLength": bytes.len()});
+        let start = self.bin.len();
+        fill(&mut self.bin);
+        let mut v = json!({"buffer": 0, "byteOffset": start, "byteLength": self.bin.len() - start});
         if let Some(t) = target {
             v["target"] = json!(t);
         }
-        self.bin.extend_from_slice(bytes);
         self.views.push(v);
         self.views.len() - 1
     }
-    fn accessor(&mut self, bytes: &[u8], target: u32, component: u32, kind: &str, count: usize, extra: Value) -> usize {
-        let view = self.view(bytes, Some(target));
+    fn accessor(
+        &mut self,
+        fill: impl FnOnce(&mut Vec<u8>),
+        target: u32,
+        component: u32,
+        kind: &str,
+        count: usize,
+        extra: Value,
+    ) -> usize {
+        let view = self.view_with(Some(target), fill);
         let mut a = json!({"bufferView": view, "componentType": component, "count": count, "type": kind});
         if let (Some(a), Some(e)) = (a.as_object_mut(), extra.as_object()) {
             for (k, v) in e {
@@ -46,7 +60,6 @@ impl Builder {
         self.accessors.len() - 1
     }
     fn vec3(&mut self, data: &[[f32; 3]], bounds: bool) -> usize {
-        let bytes: Vec<u8> = data.iter().flat_map(|p| p.iter().flat_map(|v| v.to_le_bytes())).collect();
         let extra = if bounds {
             let mut lo = [f32::INFINITY; 3];
             let mut hi = [f32::NEG_INFINITY; 3];
@@ -60,11 +73,35 @@ impl Builder {
         } else {
             json!({})
         };
-        self.accessor(&bytes, ARRAY_BUFFER, FLOAT, "VEC3", data.len(), extra)
+        self.accessor(|bin| put_le(bin, data), ARRAY_BUFFER, FLOAT, "VEC3", data.len(), extra)
     }
     fn indices(&mut self, tris: &[[u32; 3]]) -> usize {
-        let bytes: Vec<u8> = tris.iter().flat_map(|t| t.iter().flat_map(|v| v.to_le_bytes())).collect();
-        self.accessor(&bytes, ELEMENT_ARRAY_BUFFER, UNSIGNED_INT, "SCALAR", tris.len() * 3, json!({}))
+        self.accessor(|bin| put_le(bin, tris), ELEMENT_ARRAY_BUFFER, UNSIGNED_INT, "SCALAR", tris.len() * 3, json!({}))
+    }
+}
+
+/// A number that glTF's binary buffer holds as its 4 little-endian bytes.
+trait Le4: Copy {
+    fn le(self) -> [u8; 4];
+}
+impl Le4 for f32 {
+    fn le(self) -> [u8; 4] {
+        self.to_le_bytes()
+    }
+}
+impl Le4 for u32 {
+    fn le(self) -> [u8; 4] {
+        self.to_le_bytes()
+    }
+}
+
+/// Appends each number of `data`, in order, as 4 little-endian bytes.
+fn put_le<T: Le4, const N: usize>(bin: &mut Vec<u8>, data: &[[T; N]]) {
+    bin.reserve(data.len() * N * 4);
+    for a in data {
+        for &v in a {
+            bin.extend_from_slice(&v.le());
+        }
     }
 }
 
@@ -92,9 +129,14 @@ impl Doc {
             attrs["NORMAL"] = json!(b.vec3(&m.normals, false));
         }
         if m.colors.len() == m.positions.len() {
-            let bytes: Vec<u8> = m.colors.iter().flat_map(|c| [c[0], c[1], c[2], 255]).collect();
+            let fill = |bin: &mut Vec<u8>| {
+                bin.reserve(m.colors.len() * 4);
+                for c in &m.colors {
+                    bin.extend_from_slice(&[c[0], c[1], c[2], 255]);
+                }
+            };
             attrs["COLOR_0"] = json!(b.accessor(
-                &bytes,
+                fill,
                 ARRAY_BUFFER,
                 UNSIGNED_BYTE,
                 "VEC4",
@@ -118,9 +160,8 @@ impl Doc {
     fn plane(&mut self, b: &mut Builder, p: &crate::scene::TexturedPlane) {
         let pos = b.vec3(&p.positions, true);
         // glTF's texture origin is the image's top-left; the plane's is bottom-left.
-        let uv: Vec<u8> =
-            p.uv.iter().flat_map(|c| [c[0], 1.0 - c[1]].into_iter().flat_map(|v| v.to_le_bytes())).collect();
-        let tex = b.accessor(&uv, ARRAY_BUFFER, FLOAT, "VEC2", p.uv.len(), json!({}));
+        let uv: Vec<[f32; 2]> = p.uv.iter().map(|c| [c[0], 1.0 - c[1]]).collect();
+        let tex = b.accessor(|bin| put_le(bin, &uv), ARRAY_BUFFER, FLOAT, "VEC2", p.uv.len(), json!({}));
         let idx = b.indices(&p.triangles);
         let view = b.view(&p.png, None);
         self.images.push(json!({"bufferView": view, "mimeType": "image/png", "name": p.file_name}));
