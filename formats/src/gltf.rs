@@ -73,34 +73,26 @@ impl Builder {
         } else {
             json!({})
         };
-        self.accessor(|bin| put_le(bin, data), ARRAY_BUFFER, FLOAT, "VEC3", data.len(), extra)
+        self.accessor(|bin| put_le(bin, data, f32::to_le_bytes), ARRAY_BUFFER, FLOAT, "VEC3", data.len(), extra)
     }
     fn indices(&mut self, tris: &[[u32; 3]]) -> usize {
-        self.accessor(|bin| put_le(bin, tris), ELEMENT_ARRAY_BUFFER, UNSIGNED_INT, "SCALAR", tris.len() * 3, json!({}))
+        self.accessor(
+            |bin| put_le(bin, tris, u32::to_le_bytes),
+            ELEMENT_ARRAY_BUFFER,
+            UNSIGNED_INT,
+            "SCALAR",
+            tris.len() * 3,
+            json!({}),
+        )
     }
 }
 
-/// A number that glTF's binary buffer holds as its 4 little-endian bytes.
-trait Le4: Copy {
-    fn le(self) -> [u8; 4];
-}
-impl Le4 for f32 {
-    fn le(self) -> [u8; 4] {
-        self.to_le_bytes()
-    }
-}
-impl Le4 for u32 {
-    fn le(self) -> [u8; 4] {
-        self.to_le_bytes()
-    }
-}
-
-/// Appends each number of `data`, in order, as 4 little-endian bytes.
-fn put_le<T: Le4, const N: usize>(bin: &mut Vec<u8>, data: &[[T; N]]) {
+/// Appends each number of `data`, in order, as its 4 little-endian bytes (`le`).
+fn put_le<T: Copy, const N: usize>(bin: &mut Vec<u8>, data: &[[T; N]], le: fn(T) -> [u8; 4]) {
     bin.reserve(data.len() * N * 4);
     for a in data {
         for &v in a {
-            bin.extend_from_slice(&v.le());
+            bin.extend_from_slice(&le(v));
         }
     }
 }
@@ -161,7 +153,8 @@ impl Doc {
         let pos = b.vec3(&p.positions, true);
         // glTF's texture origin is the image's top-left; the plane's is bottom-left.
         let uv: Vec<[f32; 2]> = p.uv.iter().map(|c| [c[0], 1.0 - c[1]]).collect();
-        let tex = b.accessor(|bin| put_le(bin, &uv), ARRAY_BUFFER, FLOAT, "VEC2", p.uv.len(), json!({}));
+        let tex =
+            b.accessor(|bin| put_le(bin, &uv, f32::to_le_bytes), ARRAY_BUFFER, FLOAT, "VEC2", p.uv.len(), json!({}));
         let idx = b.indices(&p.triangles);
         let view = b.view(&p.png, None);
         self.images.push(json!({"bufferView": view, "mimeType": "image/png", "name": p.file_name}));
