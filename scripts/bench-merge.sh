@@ -5,7 +5,7 @@
 # this machine cannot render two 640x480 cameras at 30 fps live), so each scan's grids have the
 # full scan's size. The loop starts when each camera_driver starts, not at the scan's START, so
 # the surfaces' geometry (and the points merged) is not measured here, only the timing. The peer records how
-# long after it receives END it receives the merged surface (/surface/cloud, published with /surface/mesh). Runs the graph as
+# long after it receives END it receives the merged surface on /surface/mesh and on /surface/cloud. Runs the graph as
 # separate processes and composed, launched by `xsurf launch` from the committed launch file,
 # inside ../shared/tools/netns-run. Needs the venv of the tests (`bash scripts/setup-venv.sh`).
 # usage: bash scripts/bench-merge.sh [SCANS] [SIZE] [MODES]

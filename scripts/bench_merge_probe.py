@@ -5,10 +5,12 @@ surface reaches a DDS peer.
 Starts `xsurf launch LAUNCH [--composed] params:=PARAMS`, then SCANS times asks c_arm_pose for a
 scan on /scan/request (START) as a hospital controller would, and records, as a Cyclone DDS
 probe, when it receives the scan's END on /scan/events and the scan's merged surface on
-/surface/cloud (the merger publishes it with /surface/mesh, from the same merge; a full body's
-mesh Marker is some 40 MB of Point structs, which the Python probe takes seconds to decode, so
-the cloud, a byte array, times the arrival; the Marker's size is computed, not measured). The latency is the cloud's receive time minus the
-END's receive time (and, beside it, minus the END's stamp). Prints one JSON line.
+/surface/mesh and /surface/cloud (the merger publishes both from the same merge, the mesh last).
+A full body's mesh Marker is some 40 MB of Point structs, which Python would take seconds to
+decode: the probe reads it as a type of the Marker's first fields only (header, ns, id, type,
+action), so a Marker is decoded in microseconds and its time is that of its arrival. The
+latency is a surface's receive time minus the END's receive time (and, beside it, minus the
+END's stamp). Prints one JSON line.
 usage: bench_merge_probe.py BIN_DIR LAUNCH PARAMS MODE SCANS OUT
 """
 import json
@@ -29,9 +31,25 @@ from cyclonedds.util import duration
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent / "tests/py"))
 from bench_live_probe import pct, stop  # noqa: E402
+from dataclasses import dataclass, field  # noqa: E402
+
+from cyclonedds.idl import IdlStruct  # noqa: E402
+from cyclonedds.idl.types import int32  # noqa: E402
 from ros_types import Header, PointCloud2, ScanEvent, Time  # noqa: E402
 
 START, END = 0, 1
+
+
+@dataclass
+class MarkerHead(IdlStruct, typename="visualization_msgs::msg::dds_::Marker_"):
+    """visualization_msgs/Marker up to its action: CDR is read field by field, so the rest of
+    the sample (the pose, the points, ...) is left undecoded. The graph's writers send no
+    XTypes type information, so Cyclone DDS matches the reader by the type's name."""
+    header: Header = field(default_factory=Header)
+    ns: str = ""
+    id: int32 = 0
+    type: int32 = 0
+    action: int32 = 0
 
 
 def wait_for(pred, timeout):
@@ -51,7 +69,9 @@ def main(bin_dir, launch, params, mode, scans, out):
     dp = DomainParticipant(0)
     reliable = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(10))
     events = DataReader(dp, Topic(dp, "rt/scan/events", ScanEvent), qos=reliable)
-    surfaces = DataReader(dp, Topic(dp, "rt/surface/cloud", PointCloud2), qos=Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(1)))
+    last = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(1))
+    surfaces = DataReader(dp, Topic(dp, "rt/surface/cloud", PointCloud2), qos=last)
+    meshes = DataReader(dp, Topic(dp, "rt/surface/mesh", MarkerHead), qos=last)
     request = DataWriter(dp, Topic(dp, "rt/scan/request", ScanEvent), qos=reliable)
     args = [str(pathlib.Path(bin_dir) / "xsurf"), "launch", launch, f"params:={params}"]
     if mode == "composed":
@@ -75,6 +95,7 @@ def main(bin_dir, launch, params, mode, scans, out):
     for k in range(scans):
         events.take(N=100)
         surfaces.take(N=10)
+        meshes.take(N=10)
         now = time.time()
         start_stamp = now
         request.write(ScanEvent(header=Header(stamp=Time(sec=int(now), nanosec=int((now % 1) * 1e9)), frame_id="table"), scan_id=0, event=START))
@@ -91,29 +112,42 @@ def main(bin_dir, launch, params, mode, scans, out):
             continue
         t_end, scan_id, end_stamp = end
 
-        def surface():
-            for s in surfaces.take(N=10):
-                st = s.header.stamp.sec + s.header.stamp.nanosec * 1e-9 if isinstance(s, PointCloud2) else 0
-                # The merged cloud is stamped with the scan's last frame, before its END.
-                if isinstance(s, PointCloud2) and start_stamp < st <= end_stamp:
-                    return (time.time(), s.width * s.height)
-            return None
+        # Both surfaces, each the first time it is seen: polled in turn, every 2 ms.
+        got = {}
 
-        got = wait_for(surface, 30)
-        if got is None:
-            rows.append({"scan": scan_id, "error": "no /surface/cloud in 30 s after END"})
-            continue
-        t_surface, points = got
-        rows.append({"scan": scan_id, "after_end_received_ms": round((t_surface - t_end) * 1e3, 1),
-                     "after_end_stamp_ms": round((t_surface - end_stamp) * 1e3, 1), "points": points})
+        def surfaces_in():
+            for name, reader, kind in (("cloud", surfaces, PointCloud2), ("mesh", meshes, MarkerHead)):
+                for s in reader.take(N=10):
+                    st = s.header.stamp.sec + s.header.stamp.nanosec * 1e-9 if isinstance(s, kind) else 0
+                    # The merged surface is stamped with the scan's last frame, before its END.
+                    if isinstance(s, kind) and start_stamp < st <= end_stamp and name not in got:
+                        got[name] = (time.time(), s.width * s.height if kind is PointCloud2 else None)
+            return True if len(got) == 2 else None
+
+        wait_for(surfaces_in, 30)
+        row = {"scan": scan_id}
+        for name in ("mesh", "cloud"):
+            if name not in got:
+                row.setdefault("error", []).append(f"no /surface/{name} in 30 s after END")
+                continue
+            t_surface, points = got[name]
+            row[f"{name}_after_end_received_ms"] = round((t_surface - t_end) * 1e3, 1)
+            row[f"{name}_after_end_stamp_ms"] = round((t_surface - end_stamp) * 1e3, 1)
+            if points is not None:
+                row["points"] = points
+        rows.append(row)
         time.sleep(1.0)
     code = stop(proc, 30)
-    lat = [r["after_end_received_ms"] for r in rows if "after_end_received_ms" in r]
-    lat_stamp = [r["after_end_stamp_ms"] for r in rows if "after_end_stamp_ms" in r]
-    print(json.dumps({"mode": mode, "scans": rows, "launch_exit": code,
-                      "after_end_received_ms_p50": pct(lat, 0.5), "after_end_received_ms_p95": pct(lat, 0.95),
-                      "after_end_received_ms_max": max(lat) if lat else None,
-                      "after_end_stamp_ms_p50": pct(lat_stamp, 0.5), "after_end_stamp_ms_p95": pct(lat_stamp, 0.95)}))
+    summary = {"mode": mode, "scans": rows, "launch_exit": code}
+    for name in ("mesh", "cloud"):
+        lat = [r[f"{name}_after_end_received_ms"] for r in rows if f"{name}_after_end_received_ms" in r]
+        lat_stamp = [r[f"{name}_after_end_stamp_ms"] for r in rows if f"{name}_after_end_stamp_ms" in r]
+        summary.update({f"{name}_after_end_received_ms_p50": pct(lat, 0.5),
+                        f"{name}_after_end_received_ms_p95": pct(lat, 0.95),
+                        f"{name}_after_end_received_ms_max": max(lat) if lat else None,
+                        f"{name}_after_end_stamp_ms_p50": pct(lat_stamp, 0.5),
+                        f"{name}_after_end_stamp_ms_p95": pct(lat_stamp, 0.95)})
+    print(json.dumps(summary))
 
 
 if __name__ == "__main__":
