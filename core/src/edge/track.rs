@@ -114,8 +114,14 @@ const MIN_LENGTH_PER_WIDTH: f32 = 2.0;
 
 /// Runs shorter than this many times `min_run` are compared with the line's typical width.
 const WIDE_RUNS: u32 = 10;
-/// A sample of a kept run this many times wider than the run's median width is not the line.
-const WIDTH_TOLERANCE: f32 = 2.5;
+/// A sample of a kept run this many times wider than the run's median width, and
+/// `WIDTH_EXCESS_PX` wider, is not the line: two surfaces' peaks merged in one row (the hard
+/// pyramid's base corners at 320x240: 3.2-4.5 px against 2, 8-18 mm off), or the line
+/// straddling a dark/bright edge.
+const WIDTH_TOLERANCE: f32 = 1.6;
+/// The least excess width (pixels) that rejects a sample: a line under a pixel wide measures
+/// one to two pixels wide as its sub-pixel phase changes along the run, which is no mixture.
+const WIDTH_EXCESS_PX: f32 = 1.5;
 /// A short run this many times wider than the line's typical width is not the line: a
 /// highlight, or the line spread over a grazing surface or mixed pixels (on the hard phantom
 /// such a run lay 5-9 mm off, widening from 3 to 10 px while the line beside it was 2-3 px).
@@ -156,7 +162,7 @@ fn faded_body(line: &LaserLine, r: &Run, scratch: &mut Vec<f32>) -> Option<usize
 }
 
 /// Clears every run shorter than `min_run`, the samples of a kept run more than
-/// `WIDTH_TOLERANCE` times its median width, every short run (under `BLOB_RUNS` times
+/// `WIDTH_TOLERANCE` times its median width (and `WIDTH_EXCESS_PX` more), every short run (under `BLOB_RUNS` times
 /// `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean width, and every run that fades
 /// out at both ends with a body shorter than `BODY_LENGTH_PER_WIDTH` times its mean width (a
 /// highlight, before any frame has shown the line's width); returns the samples cleared. A run
@@ -183,14 +189,16 @@ pub(super) fn drop_short_runs(
         let too_wide =
             r.count < WIDE_RUNS * cfg.min_run && typical_width_px.is_some_and(|t| width > WIDE_RUN_TOLERANCE * t);
         if r.count >= cfg.min_run && !blob && !too_wide {
-            // A kept run: its samples far wider than its own median are mixed pixels (the line
-            // straddling a dark/bright edge, or running into a highlight).
+            // A kept run: its samples far wider than its own median are mixed pixels (two
+            // surfaces in one peak, the line straddling a dark/bright edge, or running into a
+            // highlight).
             scratch.clear();
             scratch.extend((r.first..=r.last).map(|s| line.width[s as usize]).filter(|w| *w > 0.0));
             let mid = scratch.len() / 2;
             let median = *scratch.select_nth_unstable_by(mid, f32::total_cmp).1;
             for s in r.first..=r.last {
-                if line.width[s as usize] > WIDTH_TOLERANCE * median && line.across(s as usize).is_finite() {
+                let w = line.width[s as usize];
+                if w > WIDTH_TOLERANCE * median && w > median + WIDTH_EXCESS_PX && line.across(s as usize).is_finite() {
                     line.clear(s as usize);
                     dropped += 1;
                 }
@@ -205,4 +213,43 @@ pub(super) fn drop_short_runs(
         }
     }
     dropped
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A vertical line of `widths.len()` rows along a gentle slope, every row found.
+    fn line(widths: &[f32]) -> LaserLine {
+        let n = widths.len();
+        LaserLine {
+            orientation: super::super::Orientation::Vertical,
+            image_width: 320,
+            image_height: n as u32,
+            u: (0..n).map(|i| 100.0 + 0.1 * i as f32).collect(),
+            v: (0..n).map(|i| i as f32).collect(),
+            strength: vec![150.0; n],
+            width: widths.to_vec(),
+            rgb: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_sample_much_wider_than_its_run_is_dropped_but_a_thin_lines_phase_is_not() {
+        let cfg = EdgeConfig::default();
+        let mut scratch = Vec::new();
+        // Two surfaces' peaks merged into one row (3.7 px against the run's 2): dropped. A row
+        // 3.4 px wide is 1.7 times the median but only 1.4 px more: kept.
+        let mut widths = vec![2.0; 60];
+        widths[20] = 3.7;
+        widths[40] = 3.4;
+        let mut l = line(&widths);
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 1);
+        assert!(!l.u[20].is_finite() && l.u[40].is_finite() && l.found() == 59);
+        // A line under a pixel wide measures 1 to 2 px as its phase moves along the run (twice
+        // its median in places): every sample kept.
+        let mut l = line(&(0..60).map(|i| if i % 3 == 0 { 2.1 } else { 1.0 }).collect::<Vec<_>>());
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
+        assert_eq!(l.found(), 60);
+    }
 }
