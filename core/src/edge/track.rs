@@ -116,7 +116,7 @@ const MIN_LENGTH_PER_WIDTH: f32 = 2.0;
 const WIDE_RUNS: u32 = 10;
 /// A sample of a kept run this many times wider than the run's median width, and
 /// `WIDTH_EXCESS_PX` wider, is not the line: two surfaces' peaks merged in one row (the hard
-/// pyramid's base corners at 320x240: 3.2-4.5 px against 2, 8-18 mm off), or the line
+/// pyramid's base corners at 320x240: 2.7-4.5 px against 2, 8-18 mm off), or the line
 /// straddling a dark/bright edge.
 const WIDTH_TOLERANCE: f32 = 1.6;
 /// The least excess width (pixels) that rejects a sample: a line under a pixel wide measures
@@ -162,11 +162,12 @@ fn faded_body(line: &LaserLine, r: &Run, scratch: &mut Vec<f32>) -> Option<usize
 }
 
 /// Clears every run shorter than `min_run`, the samples of a kept run more than
-/// `WIDTH_TOLERANCE` times its median width (and `WIDTH_EXCESS_PX` more), every short run (under `BLOB_RUNS` times
-/// `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean width, and every run that fades
-/// out at both ends with a body shorter than `BODY_LENGTH_PER_WIDTH` times its mean width (a
-/// highlight, before any frame has shown the line's width); returns the samples cleared. A run
-/// that spans the whole region is not judged by its length.
+/// `WIDTH_TOLERANCE` times its median width (and `WIDTH_EXCESS_PX` more), every short run
+/// (under `BLOB_RUNS` times `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean
+/// width, and every run that fades out at both ends with a body shorter than
+/// `BODY_LENGTH_PER_WIDTH` times its mean width (a highlight, before any frame has shown the
+/// line's width); returns the samples cleared. A run that spans the whole region is not judged
+/// by its length.
 ///
 /// With the line's typical width from earlier frames (`typical_width_px`), a run under
 /// `WIDE_RUNS` times `min_run` and more than `WIDE_RUN_TOLERANCE` times as wide is dropped too: a
@@ -223,7 +224,7 @@ mod tests {
     fn line(widths: &[f32]) -> LaserLine {
         let n = widths.len();
         LaserLine {
-            orientation: super::super::Orientation::Vertical,
+            orientation: crate::edge::Orientation::Vertical,
             image_width: 320,
             image_height: n as u32,
             u: (0..n).map(|i| 100.0 + 0.1 * i as f32).collect(),
