@@ -118,9 +118,11 @@ def main(bin_dir, launch, params, mode, scans, out):
         def surfaces_in():
             for name, reader, kind in (("cloud", surfaces, PointCloud2), ("mesh", meshes, MarkerHead)):
                 for s in reader.take(N=10):
-                    st = s.header.stamp.sec + s.header.stamp.nanosec * 1e-9 if isinstance(s, kind) else 0
+                    if not isinstance(s, kind) or name in got:
+                        continue
                     # The merged surface is stamped with the scan's last frame, before its END.
-                    if isinstance(s, kind) and start_stamp < st <= end_stamp and name not in got:
+                    st = s.header.stamp.sec + s.header.stamp.nanosec * 1e-9
+                    if start_stamp < st <= end_stamp:
                         got[name] = (time.time(), s.width * s.height if kind is PointCloud2 else None)
             return True if len(got) == 2 else None
 

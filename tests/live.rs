@@ -552,8 +552,8 @@ fn two_hosts_over_a_lossy_gigabit_link_count_every_lost_frame() {
         eprintln!("two hosts, scan {scan}: {acc:?}");
         // The live bounds. The point count is per frame that crossed the link (the rest are
         // counted below): the merged surface holds some 280-340 points per frame received (6
-        // scans here). A lost frame costs its own points and, with max_edge_m at twice the frame
-        // spacing, only its own cells.
+        // scans here). A lost frame costs its own points; with max_edge_m at twice the frame
+        // spacing, the frames beside it still mesh with their other neighbours and keep theirs.
         let report: serde_json::Value =
             serde_json::from_slice(&std::fs::read(dir.join("scan_report.json")).unwrap()).unwrap();
         let received: u64 =

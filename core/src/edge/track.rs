@@ -115,9 +115,9 @@ const MIN_LENGTH_PER_WIDTH: f32 = 2.0;
 /// Runs shorter than this many times `min_run` are compared with the line's typical width.
 const WIDE_RUNS: u32 = 10;
 /// A sample of a kept run this many times wider than the run's median width, and
-/// `WIDTH_EXCESS_PX` wider, is not the line: two surfaces' peaks merged in one row (the hard
-/// pyramid's base corners at 320x240: 2.7-4.5 px against 2, 8-18 mm off), or the line
-/// straddling a dark/bright edge.
+/// `WIDTH_EXCESS_PX` wider, is not the line: two surfaces' peaks merged in one row (at the hard
+/// pyramid's base corners at 320x240, 2.7-4.5 px against 2 and 8-18 mm off; the widest of them
+/// are caught), or the line straddling a dark/bright edge.
 const WIDTH_TOLERANCE: f32 = 1.6;
 /// The least excess width (pixels) that rejects a sample: a line under a pixel wide measures
 /// one to two pixels wide as its sub-pixel phase changes along the run, which is no mixture.
