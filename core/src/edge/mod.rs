@@ -692,11 +692,10 @@ fn find_peak<S: Sample>(
         })
 }
 
-/// The flanks from two samples beyond the half-maximum run `(lo, hi)` outwards, each the
-/// samples below `level` (at most `flank`) up to the first sample that is not (a brighter
-/// surface beside the line). `None` unless each side has at least `DARK_FLANK` samples and
-/// ends at such a sample or at its full length, never at the profile's end.
-fn dark_background<S: Sample>(p: &[S], (lo, hi): (usize, usize), flank: usize, level: f32) -> Option<Flanks> {
+/// The extents `(start..end, rstart..rend)` of the dark flanks beside the half-maximum run
+/// `(lo, hi)`: from two samples beyond it outwards, each the samples below `level` (at most
+/// `flank`) up to the first sample that is not (a brighter surface beside the line).
+fn dark_flanks<S: Sample>(p: &[S], (lo, hi): (usize, usize), flank: usize, level: f32) -> Option<[usize; 4]> {
     let end = lo.checked_sub(1)?;
     let mut start = end;
     while start > 0 && end - start < flank && p[start - 1].f() < level {
@@ -707,6 +706,14 @@ fn dark_background<S: Sample>(p: &[S], (lo, hi): (usize, usize), flank: usize, l
     while rend < p.len() && rend - rstart < flank && p[rend].f() < level {
         rend += 1;
     }
+    Some([start, end, rstart, rend])
+}
+
+/// The background of the dark flanks (`dark_flanks`). `None` unless each side has at least
+/// `DARK_FLANK` samples and ends at a brighter sample or at its full length, never at the
+/// profile's end.
+fn dark_background<S: Sample>(p: &[S], run: (usize, usize), flank: usize, level: f32) -> Option<Flanks> {
+    let [start, end, rstart, rend] = dark_flanks(p, run, flank, level)?;
     let closed = |a: usize, b: usize, edge: bool| b - a >= DARK_FLANK && (b - a == flank || !edge);
     if !closed(start, end, start == 0) || !closed(rstart, rend, rend == p.len()) {
         return None;
@@ -719,20 +726,11 @@ fn dark_background<S: Sample>(p: &[S], (lo, hi): (usize, usize), flank: usize, l
     Some(Flanks::of(whole(start, end), whole(rstart, rend)))
 }
 
-/// Whether the dark flanks of `dark_background(p, (lo, hi), flank, level)` both end at a
-/// surface brighter than the line's `peak` (within `ENCLOSED_REACH` samples beyond them): a
-/// dark stripe between two brighter surfaces, not a narrow mark on a textured floor.
-fn enclosed<S: Sample>(p: &[S], (lo, hi): (usize, usize), flank: usize, level: f32, peak: f32) -> bool {
-    let Some(end) = lo.checked_sub(1) else { return false };
-    let mut start = end;
-    while start > 0 && end - start < flank && p[start - 1].f() < level {
-        start -= 1;
-    }
-    let rstart = hi + 2;
-    let mut rend = rstart.min(p.len());
-    while rend < p.len() && rend - rstart < flank && p[rend].f() < level {
-        rend += 1;
-    }
+/// Whether the dark flanks (`dark_flanks`) both end at a surface brighter than the line's
+/// `peak` (within `ENCLOSED_REACH` samples beyond them): a dark stripe between two brighter
+/// surfaces, not a narrow mark on a textured floor.
+fn enclosed<S: Sample>(p: &[S], run: (usize, usize), flank: usize, level: f32, peak: f32) -> bool {
+    let Some([start, _, _, rend]) = dark_flanks(p, run, flank, level) else { return false };
     let left = (start.saturating_sub(ENCLOSED_REACH)..start).any(|i| p[i].f() >= peak);
     let right = (rend..(rend + ENCLOSED_REACH).min(p.len())).any(|i| p[i].f() >= peak);
     left && right
