@@ -122,16 +122,6 @@ const WIDTH_TOLERANCE: f32 = 1.6;
 /// The least excess width (pixels) that rejects a sample: a line under a pixel wide measures
 /// one to two pixels wide as its sub-pixel phase changes along the run, which is no mixture.
 const WIDTH_EXCESS_PX: f32 = 1.5;
-/// A sample of a kept run narrower than this fraction of the run's median width (and
-/// `NARROW_DEFICIT_PX` narrower, and narrower than `narrow_width_px`) is the sheet cut by an
-/// edge parallel to the line (the first or last frame on an object, a dark/bright edge under
-/// the sheet): what is seen is a sliver of the sheet, its centre on the sliver, not on the
-/// sheet. On the hard phantom at 640x480 such samples, 0.9-1.6 px wide in runs of 2.8, lay 1-5
-/// mm off in whole stretches of one frame, and carried half of the squared error.
-const NARROW_TOLERANCE: f32 = 0.6;
-/// The least deficit (pixels) that rejects a narrow sample: a line under a pixel wide measures
-/// one to two pixels wide as its phase changes along the run, which is no sliver.
-const NARROW_DEFICIT_PX: f32 = 1.1;
 /// A sample too wide for its run is dropped only if its centre is also this fraction of its
 /// width off the course of its neighbours: two surfaces merged into one peak pull its centre
 /// aside, while a real line that merely widens (blooming on a bright floor) stays on course.
@@ -200,8 +190,7 @@ fn faded_body(line: &LaserLine, r: &Run, scratch: &mut Vec<f32>) -> Option<usize
 }
 
 /// Clears every run shorter than `min_run`, the samples of a kept run more than
-/// `WIDTH_TOLERANCE` times its median width (and `WIDTH_EXCESS_PX` more) and off its course, or
-/// less than `NARROW_TOLERANCE` times it (a sliver of the sheet), every short run
+/// `WIDTH_TOLERANCE` times its median width (and `WIDTH_EXCESS_PX` more), every short run
 /// (under `BLOB_RUNS` times `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean
 /// width, and every run that fades out at both ends with a body shorter than
 /// `BODY_LENGTH_PER_WIDTH` times its mean width (a highlight, before any frame has shown the
@@ -238,17 +227,11 @@ pub(super) fn drop_short_runs(
             let median = *scratch.select_nth_unstable_by(mid, f32::total_cmp).1;
             for s in r.first..=r.last {
                 let w = line.width[s as usize];
-                let wide = w > WIDTH_TOLERANCE * median
+                if w > WIDTH_TOLERANCE * median
                     && w > median + WIDTH_EXCESS_PX
-                    && off_course(line, &r, s, WIDTH_TOLERANCE * median).is_none_or(|d| d > OFF_COURSE_PER_WIDTH * w);
-                // A sliver of the sheet, cut by an edge parallel to the line: as narrow as the
-                // optics allow (under `narrow_width_px`; a wide saturated line's narrower rows
-                // are its top above a shoulder, not a sliver), in a run whose line is wider.
-                let narrow = w > 0.0
-                    && w < cfg.narrow_width_px
-                    && w < NARROW_TOLERANCE * median
-                    && w < median - NARROW_DEFICIT_PX;
-                if (wide || narrow) && line.across(s as usize).is_finite() {
+                    && line.across(s as usize).is_finite()
+                    && off_course(line, &r, s, WIDTH_TOLERANCE * median).is_none_or(|d| d > OFF_COURSE_PER_WIDTH * w)
+                {
                     line.clear(s as usize);
                     dropped += 1;
                 }
@@ -315,28 +298,5 @@ mod tests {
         let mut l = line(&(0..60).map(|i| if i % 3 == 0 { 2.1 } else { 1.0 }).collect::<Vec<_>>());
         assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
         assert_eq!(l.found(), 60);
-    }
-
-    #[test]
-    fn a_sliver_of_the_sheet_is_dropped_but_a_thin_or_a_wide_lines_narrower_rows_are_not() {
-        let cfg = EdgeConfig::default();
-        let mut scratch = Vec::new();
-        // A line 2.8 px wide whose rows 20-24 see a sliver of the sheet cut by an edge (1.1 px):
-        // dropped. Rows 1.8 px wide (0.64 of the median) are kept.
-        let mut widths = vec![2.8; 60];
-        widths[20..25].fill(1.1);
-        widths[40] = 1.8;
-        let mut l = line(&widths);
-        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 5);
-        assert!((20..25).all(|i| !l.u[i].is_finite()) && l.u[40].is_finite() && l.found() == 55);
-        // A thin line's phase (1 to 2 px along the run, median 2): kept.
-        let mut l = line(&(0..60).map(|i| if i % 3 == 0 { 1.0 } else { 2.0 }).collect::<Vec<_>>());
-        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
-        // A wide saturated line (12 px) measured 5 px where only its top stands above a
-        // shoulder: kept (wider than `narrow_width_px`, no sliver).
-        let mut widths = vec![12.0; 60];
-        widths[30..33].fill(5.0);
-        let mut l = line(&widths);
-        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
     }
 }
