@@ -684,9 +684,11 @@ fn find_peak<S: Sample>(
             judge(p, m, &f, None, cfg, (scale, saturation), run)
         })
         .or_else(|e| {
-            dark_background(p, (glo, ghi), flank, dark_level)
+            dark_flanks(p, (glo, ghi), flank, dark_level)
+                .filter(|&e| enclosed(p, e, peak))
+                .and_then(|e| dark_flanks_background(p, e, flank))
                 .and_then(|f| judge(p, m, &f, None, cfg, (scale, saturation), run).ok())
-                .filter(|pk| pk.width <= cfg.narrow_width_px && enclosed(p, (glo, ghi), flank, dark_level, peak))
+                .filter(|pk| pk.width <= cfg.narrow_width_px)
                 .map(|pk| Peak { fallback: Some(run), ..pk })
                 .ok_or(e)
         })
@@ -713,7 +715,12 @@ fn dark_flanks<S: Sample>(p: &[S], (lo, hi): (usize, usize), flank: usize, level
 /// `DARK_FLANK` samples and ends at a brighter sample or at its full length, never at the
 /// profile's end.
 fn dark_background<S: Sample>(p: &[S], run: (usize, usize), flank: usize, level: f32) -> Option<Flanks> {
-    let [start, end, rstart, rend] = dark_flanks(p, run, flank, level)?;
+    dark_flanks(p, run, flank, level).and_then(|e| dark_flanks_background(p, e, flank))
+}
+
+/// The background of the dark flanks with extents `[start, end, rstart, rend]`, as
+/// `dark_background`.
+fn dark_flanks_background<S: Sample>(p: &[S], [start, end, rstart, rend]: [usize; 4], flank: usize) -> Option<Flanks> {
     let closed = |a: usize, b: usize, edge: bool| b - a >= DARK_FLANK && (b - a == flank || !edge);
     if !closed(start, end, start == 0) || !closed(rstart, rend, rend == p.len()) {
         return None;
@@ -726,11 +733,10 @@ fn dark_background<S: Sample>(p: &[S], run: (usize, usize), flank: usize, level:
     Some(Flanks::of(whole(start, end), whole(rstart, rend)))
 }
 
-/// Whether the dark flanks (`dark_flanks`) both end at a surface brighter than the line's
-/// `peak` (within `ENCLOSED_REACH` samples beyond them): a dark stripe between two brighter
-/// surfaces, not a narrow mark on a textured floor.
-fn enclosed<S: Sample>(p: &[S], run: (usize, usize), flank: usize, level: f32, peak: f32) -> bool {
-    let Some([start, _, _, rend]) = dark_flanks(p, run, flank, level) else { return false };
+/// Whether the dark flanks with extents `[start, _, _, rend]` (`dark_flanks`) both end at a
+/// surface brighter than the line's `peak` (within `ENCLOSED_REACH` samples beyond them): a
+/// dark stripe between two brighter surfaces, not a narrow mark on a textured floor.
+fn enclosed<S: Sample>(p: &[S], [start, _, _, rend]: [usize; 4], peak: f32) -> bool {
     let left = (start.saturating_sub(ENCLOSED_REACH)..start).any(|i| p[i].f() >= peak);
     let right = (rend..(rend + ENCLOSED_REACH).min(p.len())).any(|i| p[i].f() >= peak);
     left && right
