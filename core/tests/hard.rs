@@ -31,40 +31,76 @@ struct Camera {
     mesh_over_points: f64,
 }
 
-fn scan(scene: &str, (w, h): (u32, u32), encoding: Encoding, speed: f64, method: Method) -> Vec<Camera> {
-    let rig = Rig::study(w, h);
-    let preset = Preset::Hard;
-    let mut settings = ScanSettings { speed_mps: speed, encoding, ..Default::default() };
-    preset.apply(&mut settings);
-    let scanner = Scanner::new(Scene::by_name(scene).unwrap(), rig.clone(), preset.laser(), settings).unwrap();
+/// The scan's `table -> carm` every 10 ms, from 0.1 s before it to 0.1 s after.
+fn poses_of(scanner: &Scanner) -> PoseTrack {
     let mut poses = PoseTrack::default();
     let mut t = -0.1;
     while t <= scanner.duration_s() + 0.1 {
         poses.push(scanner.settings.start_stamp_ns + (t * 1e9).round() as i64, &scanner.pose_at(t));
         t += 0.01;
     }
+    poses
+}
+
+/// Sorted positions grouped where they lie more than 3 px apart: (first, last, count) each.
+fn clusters(us: &[f64]) -> Vec<(f64, f64, usize)> {
+    let mut out: Vec<(f64, f64, usize)> = Vec::new();
+    for &u in us {
+        match out.last_mut() {
+            Some(c) if u - c.1 <= 3.0 => {
+                c.1 = u;
+                c.2 += 1;
+            }
+            _ => out.push((u, u, 1)),
+        }
+    }
+    out
+}
+
+fn scan(scene: &str, (w, h): (u32, u32), encoding: Encoding, speed: f64, method: Method) -> Vec<Camera> {
+    let rig = Rig::study(w, h);
+    let preset = Preset::Hard;
+    let mut settings = ScanSettings { speed_mps: speed, encoding, ..Default::default() };
+    preset.apply(&mut settings);
+    let scanner = Scanner::new(Scene::by_name(scene).unwrap(), rig.clone(), preset.laser(), settings).unwrap();
+    let poses = poses_of(&scanner);
     let tri_cfg = TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() };
     let sc = &scanner.scene;
     let mut out = Vec::new();
     for (ci, cam) in rig.cameras.iter().enumerate() {
         let tri = Triangulator::new(cam.geometry().unwrap(), &tri_cfg).unwrap();
         let mut det = EdgeDetector::new(EdgeConfig { method, ..Default::default() }).unwrap();
-        let mut grid = Grid::new(h as usize);
-        let (mut line, mut prof) = (LaserLine::default(), Profile::default());
+        // The first line's grid and the second surfaces' (rows where the line crosses two; only
+        // with `SECOND=1`: the nodes keep the first line alone so far).
+        let second_surfaces = std::env::var("SECOND").is_ok();
+        let mut grids = [Grid::new(h as usize), Grid::new(h as usize)];
+        let mut lines = [LaserLine::default(), LaserLine::default()];
+        let mut prof = Profile::default();
         let (mut truth, mut laser_off_points) = (Vec::new(), 0);
         for f in 0..scanner.frame_count() {
             let ft = scanner.frame_time(f);
-            det.detect(&scanner.render(ci, f).view().unwrap(), &mut line).unwrap();
-            tri.triangulate(&line, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
-            if !ft.laser_on {
-                laser_off_points += prof.points.iter().filter(|p| p[0].is_finite()).count();
+            let [first, second] = &mut lines;
+            let image = scanner.render(ci, f);
+            if second_surfaces {
+                det.detect_surfaces(&image.view().unwrap(), first, second).unwrap();
+            } else {
+                det.detect(&image.view().unwrap(), first).unwrap();
             }
-            grid.push(ft.stamp_ns, &prof).unwrap();
+            for (line, grid) in lines.iter().zip(grids.iter_mut()).take(1 + usize::from(second_surfaces)) {
+                tri.triangulate(line, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
+                if !ft.laser_on {
+                    laser_off_points += prof.points.iter().filter(|p| p[0].is_finite()).count();
+                }
+                grid.push(ft.stamp_ns, &prof).unwrap();
+            }
             truth.extend(scanner.observable_points(ci, f, tri_cfg.min_ray_plane_angle_deg));
         }
         // The mesher's own preparation: points their neighbours contradict are rejected.
-        let rejected = grid.clean(&MeshConfig { fill_single_holes: false, ..Default::default() }).rejected;
-        let pts: Vec<[f32; 3]> = grid.points().iter().copied().filter(|p| p[0].is_finite()).collect();
+        let clean = MeshConfig { fill_single_holes: false, ..Default::default() };
+        let rejected: usize = grids.iter_mut().map(|g| g.clean(&clean).rejected).sum();
+        let second = grids[1].valid();
+        let pts: Vec<[f32; 3]> =
+            grids.iter().flat_map(|g| g.points().iter().copied()).filter(|p| p[0].is_finite()).collect();
         let v = |p: &[f32; 3]| Vec3::new(p[0].into(), p[1].into(), p[2].into());
         let errs: Vec<f64> = pts.iter().map(|p| sc.signed_distance(v(p)).abs()).collect();
         let n = errs.len().max(1) as f64;
@@ -76,7 +112,8 @@ fn scan(scene: &str, (w, h): (u32, u32), encoding: Encoding, speed: f64, method:
         // grey image (those points count in the coverage above, not here).
         let band: Vec<Vec3> = truth.iter().copied().filter(|p| sc.in_band(*p, BAND_EDGE_M)).collect();
         let cov = coverage(&truth, &pts, 0.003);
-        let mesh = mesh_grid(&grid, &MeshConfig::default());
+        let mut mesh = mesh_grid(&grids[0], &MeshConfig::default());
+        mesh.append(&mesh_grid(&grids[1], &MeshConfig::default()));
         let c = Camera {
             name: cam.name.clone(),
             points: pts.len(),
@@ -89,7 +126,7 @@ fn scan(scene: &str, (w, h): (u32, u32), encoding: Encoding, speed: f64, method:
             mesh_over_points: mesh_coverage(&truth, &mesh, 0.003) / cov.max(1e-9),
         };
         eprintln!(
-            "{scene} {w}x{h} {} {speed} m/s {method:?} {}: {} points ({rejected} rejected), rms {:.3} mm, {:.3} % beyond 5 mm, table median {:+.3} mm, coverage {:.2} % (dark band {:.1} % of {}), {} points in laser-off frames, mesh covers {:.1} % of the points' coverage",
+            "{scene} {w}x{h} {} {speed} m/s {method:?} {}: {} points ({second} of a second surface, {rejected} rejected), rms {:.3} mm, {:.3} % beyond 5 mm, table median {:+.3} mm, coverage {:.2} % (dark band {:.1} % of {}), {} points in laser-off frames, mesh covers {:.1} % of the points' coverage",
             encoding.ros_name(),
             c.name,
             c.points,
@@ -248,12 +285,7 @@ fn probe_outliers() {
     let mut settings = ScanSettings { encoding: enc, speed_mps: speed, ..Default::default() };
     Preset::Hard.apply(&mut settings);
     let s = Scanner::new(Scene::by_name(&scene).unwrap(), rig.clone(), Preset::Hard.laser(), settings).unwrap();
-    let mut poses = PoseTrack::default();
-    let mut t = -0.1;
-    while t <= s.duration_s() + 0.1 {
-        poses.push(s.settings.start_stamp_ns + (t * 1e9).round() as i64, &s.pose_at(t));
-        t += 0.01;
-    }
+    let poses = poses_of(&s);
     let cam: usize = std::env::var("CAM").map_or(0, |v| v.parse().unwrap());
     let tri = Triangulator::new(
         rig.cameras[cam].geometry().unwrap(),
@@ -299,7 +331,8 @@ fn probe_outliers() {
 }
 
 /// The whole acceptance matrix as a table (run with `--ignored --nocapture`; BENCHMARKS.md and
-/// the issue note quote it).
+/// the issue note quote it). `SECOND=1`: with the second surfaces' lines
+/// ([`EdgeDetector::detect_surfaces`]).
 #[test]
 #[ignore]
 fn report() {
@@ -370,4 +403,97 @@ fn probe_dark_misses() {
         }
     }
     eprintln!("{missed} of {total} dark-print rows missed");
+}
+
+/// Debug aid: rows where the true line crosses twice (two surfaces in one row, 3 px apart or
+/// more), how many, and whether the detector's sample lies on one of them. `SCENE`, `W`, `CAM`.
+#[test]
+#[ignore]
+#[allow(clippy::too_many_lines)]
+fn probe_two_surfaces() {
+    let scene = std::env::var("SCENE").unwrap_or("phantom".into());
+    let w: u32 = std::env::var("W").map_or(640, |v| v.parse().unwrap());
+    let enc = if std::env::var("RGB").is_ok() { Encoding::Rgb8 } else { Encoding::Mono8 };
+    let cam: usize = std::env::var("CAM").map_or(0, |v| v.parse().unwrap());
+    let h = w * 3 / 4;
+    let rig = Rig::study(w, h);
+    let mut settings = ScanSettings { encoding: enc, ..Default::default() };
+    Preset::Hard.apply(&mut settings);
+    let s = Scanner::new(Scene::by_name(&scene).unwrap(), rig.clone(), Preset::Hard.laser(), settings).unwrap();
+    let geo = rig.cameras[cam].geometry().unwrap();
+    let poses = poses_of(&s);
+    let tri =
+        Triangulator::new(geo.clone(), &TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() })
+            .unwrap();
+    let mut prof = Profile::default();
+    let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
+    let (mut line, mut second) = (LaserLine::default(), LaserLine::default());
+    let (mut rows_total, mut rows_two, mut on_first, mut on_second, mut truth_second) = (0, 0, 0, 0, 0);
+    let (mut second_total, mut second_off) = (0, 0);
+    for f in 0..s.frame_count() {
+        let ft = s.frame_time(f);
+        let optical_from_table =
+            xsurf_core::pose::table_from_carm(ft.travel_m, 0.0, 0.0).compose(&geo.carm_from_optical).inverse();
+        let mut rows: std::collections::BTreeMap<i64, Vec<f64>> = Default::default();
+        for p in s.observable_points(cam, f, 15.0) {
+            if let Some((u, v)) = geo.model.project(optical_from_table.transform_point(p)) {
+                rows.entry(v.floor() as i64).or_default().push(u);
+            }
+        }
+        if rows.is_empty() {
+            continue;
+        }
+        det.detect_surfaces(&s.render(cam, f).view().unwrap(), &mut line, &mut second).unwrap();
+        tri.triangulate(&second, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
+        for v in (0..h as usize).filter(|&v| second.u[v].is_finite()) {
+            second_total += 1;
+            let x = f64::from(second.u[v]);
+            let p = prof.points[v];
+            let e = if p[0].is_finite() {
+                s.scene.signed_distance(Vec3::new(p[0].into(), p[1].into(), p[2].into())) * 1e3
+            } else {
+                f64::NAN
+            };
+            if e.abs() > 2.0 {
+                second_off += 1;
+                eprintln!(
+                    "frame {f} row {v}: second sample {x:.1} width {:.2} strength {:.0} (first {:.1} width {:.2} strength {:.0}) distance {e:+.1} mm",
+                    second.width[v], second.strength[v], line.u[v], line.width[v], line.strength[v]
+                );
+            }
+        }
+        for (v, mut us) in rows {
+            if v < 0 || v >= h as i64 {
+                continue;
+            }
+            rows_total += 1;
+            us.sort_by(f64::total_cmp);
+            let clusters = clusters(&us);
+            if clusters.len() < 2 {
+                continue;
+            }
+            rows_two += 1;
+            truth_second += clusters[1..].iter().map(|c| c.2).sum::<usize>();
+            let found = f64::from(line.u[v as usize]);
+            let hit: Vec<bool> = clusters.iter().map(|c| found > c.0 - 2.0 && found < c.1 + 2.0).collect();
+            if hit.iter().any(|&x| x) {
+                on_first += 1;
+            }
+            let found2 = f64::from(second.u[v as usize]);
+            let hit2 = clusters.iter().position(|c| found2 > c.0 - 2.0 && found2 < c.1 + 2.0);
+            if hit2.is_some() && hit2 != hit.iter().position(|&x| x) {
+                on_second += 1;
+            }
+            if f % 20 == 0 {
+                eprintln!(
+                    "frame {f} row {v}: clusters {:?} found {found:.1}",
+                    clusters
+                        .iter()
+                        .map(|c| ((c.0 * 10.0).round() / 10.0, (c.1 * 10.0).round() / 10.0, c.2))
+                        .collect::<Vec<_>>()
+                );
+            }
+        }
+    }
+    eprintln!("{scene} {w} cam{}: {rows_two} of {rows_total} rows cross two surfaces; the first sample is on one of them in {on_first}, the second on the other in {on_second}; {truth_second} truth points beyond each row's first cluster; {second_total} second samples, {second_off} beyond 2 mm", cam + 1);
 }

@@ -870,6 +870,8 @@ pub struct DetectStats {
     /// Peaks that passed every test of their own row but belonged to a run shorter than
     /// `min_run` (noise, texture, a highlight, a frame without laser light), dropped.
     pub short_runs: u32,
+    /// Samples of the second line (a second surface in the same row), where asked for.
+    pub second: u32,
 }
 
 /// A reusable detector: owns its scratch buffers so that the hot path does not allocate.
@@ -888,6 +890,8 @@ pub struct EdgeDetector {
     widths: Vec<f32>,
     /// The frame's signal as bytes, where it is not read in place.
     plane: Plane,
+    /// Per sample of the second line: saturated, and a narrow line's fit.
+    second_state: Vec<(bool, Option<Fit>)>,
 }
 
 /// Where a detection reads its signal.
@@ -1114,11 +1118,40 @@ impl EdgeDetector {
     /// search near the run's own course (so a brighter highlight or a texture peak beside the
     /// line yields to the line), and runs shorter than `min_run` are dropped.
     pub fn detect(&mut self, image: &ImageView<'_>, out: &mut LaserLine) -> Result<DetectStats, EdgeError> {
+        self.detect_with(image, out, None)
+    }
+
+    /// [`EdgeDetector::detect`], and where two surfaces put the line into one row, the other
+    /// surface's line into `second` (the same shape as `out`, NaN elsewhere).
+    ///
+    /// Where an object hides part of the table, the object's line and the table's overlap by a
+    /// few rows, and the first line holds one of them. Each run of the first line (at least
+    /// `min_run` samples) is followed on beyond its ends into the rows another run holds, by a
+    /// search near its own course (as the first line's runs are extended into free rows); what
+    /// it finds there, at least twice the line's width from the first line's sample, is the
+    /// second line. So a second sample is always the continuation of a line found in rows of
+    /// its own, never a lone peak: a highlight or texture beside the line is not taken for a
+    /// second surface. A frame without a first line has no second.
+    pub fn detect_surfaces(
+        &mut self,
+        image: &ImageView<'_>,
+        out: &mut LaserLine,
+        second: &mut LaserLine,
+    ) -> Result<DetectStats, EdgeError> {
+        self.detect_with(image, out, Some(second))
+    }
+
+    fn detect_with(
+        &mut self,
+        image: &ImageView<'_>,
+        out: &mut LaserLine,
+        second: Option<&mut LaserLine>,
+    ) -> Result<DetectStats, EdgeError> {
         let region = self.config.region(image)?;
         let vertical = self.config.line_orientation == Orientation::Vertical;
         let mut plane = std::mem::take(&mut self.plane);
         let signal = fill_plane(image, self.config.channel, vertical, region.clone(), &mut plane);
-        let r = self.detect_in(image, region, signal, out);
+        let r = self.detect_in(image, region, signal, out, second);
         self.plane = plane;
         Ok(r)
     }
@@ -1131,6 +1164,7 @@ impl EdgeDetector {
         (xs, ys): (std::ops::Range<u32>, std::ops::Range<u32>),
         signal: Signal<'_>,
         out: &mut LaserLine,
+        second: Option<&mut LaserLine>,
     ) -> DetectStats {
         let cfg = &self.config;
         let (w, h) = (image.width(), image.height());
@@ -1159,17 +1193,7 @@ impl EdgeDetector {
         self.state.clear();
         self.state.resize(samples as usize, (false, None));
         let put = |out: &mut LaserLine, state: &mut [(bool, Option<Fit>)], s: u32, peak: Option<Peak>| {
-            let i = s as usize;
-            let Some(peak) = peak else {
-                out.clear(i);
-                return;
-            };
-            let (u, v) = if vertical { (peak.pos, s as f32) } else { (s as f32, peak.pos) };
-            out.u[i] = u;
-            out.v[i] = v;
-            out.strength[i] = peak.strength / search.scale;
-            out.width[i] = peak.width;
-            state[i] = (peak.saturated, peak.fit);
+            put_peak(out, state, s, peak, vertical, search.scale)
         };
         for s in search.outer.clone() {
             stats.searched += 1;
@@ -1194,24 +1218,55 @@ impl EdgeDetector {
             }
         }
         resolve_one_edge_fits(&self.state, &mut self.sigma_px, out);
-        if let Some(lane) = laser_lane(cfg.channel, enc) {
-            let span = (search.inner.clone(), search.outer.clone());
-            recentre_on_laser(image, cfg, span, lane, &mut self.scratch.raw, out);
+        let lane = laser_lane(cfg.channel, enc);
+        let span = (search.inner.clone(), search.outer.clone());
+        if let Some(lane) = lane {
+            recentre_on_laser(image, cfg, span.clone(), lane, &mut self.scratch.raw, out);
         }
-        for s in search.outer.clone() {
-            let i = s as usize;
-            if !out.u[i].is_finite() {
-                continue;
-            }
-            stats.found += 1;
-            stats.saturated += u32::from(self.state[i].0);
-            if enc.is_color() {
-                let c = side_colour(image, out.u[i], out.v[i], vertical, cfg.color_offset_px);
-                out.rgb[3 * i..3 * i + 3].copy_from_slice(&c);
-            }
+        (stats.found, stats.saturated) = finish(image, cfg, &self.state, search.outer.clone(), out);
+        let Some(second) = second else { return stats };
+        second.reset(cfg.line_orientation, w, h, samples as usize, enc.is_color());
+        if cfg.method == Method::Gradient {
+            return stats;
         }
+        let mut state = std::mem::take(&mut self.second_state);
+        state.clear();
+        state.resize(samples as usize, (false, None));
+        second_line(&search, &mut self.scratch, out, second, &mut state);
+        resolve_one_edge_fits(&state, &mut self.sigma_px, second);
+        if let Some(lane) = lane {
+            recentre_on_laser(image, cfg, span, lane, &mut self.scratch.raw, second);
+        }
+        stats.second = finish(image, cfg, &state, search.outer.clone(), second).0;
+        self.second_state = state;
         stats
     }
+}
+
+/// The second surfaces' samples beside `first` (see [`EdgeDetector::detect_surfaces`]),
+/// written into `second`, their saturation and fits into `state`.
+fn second_line(
+    search: &Search<'_, '_>,
+    scratch: &mut Scratch,
+    first: &LaserLine,
+    second: &mut LaserLine,
+    state: &mut [(bool, Option<Fit>)],
+) {
+    let vertical = search.vertical;
+    track::second_surfaces(first, search.cfg, search.outer.clone(), |s, near, held| {
+        if second.u[s as usize].is_finite() {
+            return track::Probe::Taken;
+        }
+        let Some(peak) = search.sample(s, Some(near), scratch) else { return track::Probe::Missed };
+        // Two lines closer than twice their widths are one line, or a line and its halo.
+        let apart = 2.0 * peak.width.max(first.width[s as usize]).max(1.0);
+        if (peak.pos - held).abs() < apart {
+            return track::Probe::Missed;
+        }
+        let pos = peak.pos;
+        put_peak(second, state, s, Some(peak), vertical, search.scale);
+        track::Probe::Found(pos)
+    });
 }
 
 /// The lines of several lasers in one image, each in its own channel (the laser's colour
@@ -1276,7 +1331,7 @@ impl LaserDetectors {
             } else {
                 Signal::Rows(plane::Rows { data: bytes, start: 0, stride: w, rows: h, cols: w })
             };
-            stats.push(d.detect_in(image, (xs.clone(), ys.clone()), signal, out));
+            stats.push(d.detect_in(image, (xs.clone(), ys.clone()), signal, out, None));
         }
         Ok(stats)
     }
@@ -1410,6 +1465,55 @@ fn recentre_on_laser(
 struct Plane {
     /// A colour image's channel over the region, row-major.
     bytes: Vec<u8>,
+}
+
+/// Writes `peak` (or no line) into sample `s` of `out`, and its saturation and fit into
+/// `state`.
+fn put_peak(
+    out: &mut LaserLine,
+    state: &mut [(bool, Option<Fit>)],
+    s: u32,
+    peak: Option<Peak>,
+    vertical: bool,
+    scale: f32,
+) {
+    let i = s as usize;
+    let Some(peak) = peak else {
+        out.clear(i);
+        return;
+    };
+    let (u, v) = if vertical { (peak.pos, s as f32) } else { (s as f32, peak.pos) };
+    out.u[i] = u;
+    out.v[i] = v;
+    out.strength[i] = peak.strength / scale;
+    out.width[i] = peak.width;
+    state[i] = (peak.saturated, peak.fit);
+}
+
+/// The found samples' colour beside the line (colour images); returns how many samples were
+/// found, and how many of them saturated.
+fn finish(
+    image: &ImageView<'_>,
+    cfg: &EdgeConfig,
+    state: &[(bool, Option<Fit>)],
+    outer: std::ops::Range<u32>,
+    out: &mut LaserLine,
+) -> (u32, u32) {
+    let vertical = cfg.line_orientation == Orientation::Vertical;
+    let (mut found, mut saturated) = (0, 0);
+    for s in outer {
+        let i = s as usize;
+        if !out.u[i].is_finite() {
+            continue;
+        }
+        found += 1;
+        saturated += u32::from(state[i].0);
+        if image.encoding().is_color() {
+            let c = side_colour(image, out.u[i], out.v[i], vertical, cfg.color_offset_px);
+            out.rgb[3 * i..3 * i + 3].copy_from_slice(&c);
+        }
+    }
+    (found, saturated)
 }
 
 /// Places the narrow-line samples that had one usable edge, with the mean sigma of this frame's
@@ -2190,6 +2294,59 @@ mod tests {
         for m in SUBPIXEL_METHODS {
             assert_eq!(detect(&img, EdgeConfig { method: m, ..Default::default() }).found(), 0, "{m:?}");
         }
+    }
+
+    #[test]
+    fn two_surfaces_in_one_row_are_both_kept() {
+        // An object's line (rows 0-34, bright) and the table's beside it (rows 25-59, dimmer):
+        // rows 25-34 cross both surfaces, where the object hides the table's line no further.
+        // A highlight beside the table's line (rows 45-48) is no second surface.
+        let object = |y: u32| 70.0 + 0.1 * f64::from(y);
+        let table = |y: u32| 30.0 + 0.05 * f64::from(y);
+        let mut img = image_from(100, 60, |y, a, b| {
+            let mut v = 20.0;
+            if y <= 34 {
+                v += 120.0 * box_line(a, b, object(y), 2.5) / box_line(-0.5, 0.5, 0.0, 2.5);
+            }
+            if y >= 25 {
+                v += 80.0 * box_line(a, b, table(y), 2.5) / box_line(-0.5, 0.5, 0.0, 2.5);
+            }
+            if (45..=48).contains(&y) && (84.5..=87.5).contains(&a) {
+                v += 150.0;
+            }
+            v
+        });
+        add_noise(&mut img, 2.0, 41);
+        for m in SUBPIXEL_METHODS {
+            let cfg = EdgeConfig { method: m, ..Default::default() };
+            let mut d = EdgeDetector::new(cfg.clone()).unwrap();
+            let (mut first, mut second) = (LaserLine::default(), LaserLine::default());
+            let stats = d.detect_surfaces(&img.view().unwrap(), &mut first, &mut second).unwrap();
+            // The first line is what `detect` finds.
+            assert_eq!(format!("{first:?}"), format!("{:?}", detect(&img, cfg)), "{m:?}");
+            assert_eq!(stats.second as usize, second.found(), "{m:?}");
+            let mut both = 0;
+            for y in 25..=34u32 {
+                let (a, b) = (f64::from(first.u[y as usize]), f64::from(second.u[y as usize]));
+                let (near, far) = if (a - object(y)).abs() < 1.0 { (a, b) } else { (b, a) };
+                if (near - object(y)).abs() < 0.2 && (far - table(y)).abs() < 0.2 {
+                    both += 1;
+                }
+            }
+            assert!(both >= 9, "{m:?}: both lines in {both} of the 10 rows that cross two surfaces");
+            // Nowhere else a second line: not beside the highlight, not in rows of one surface.
+            let elsewhere: Vec<u32> =
+                (0..60u32).filter(|&y| !(25..=34).contains(&y) && second.u[y as usize].is_finite()).collect();
+            assert!(elsewhere.is_empty(), "{m:?}: second samples in rows {elsewhere:?}");
+            assert_eq!(second.len(), 60);
+        }
+        // Without laser light, no line, first or second.
+        let mut dark = image_from(100, 60, |_, _, _| 20.0);
+        add_noise(&mut dark, 2.0, 43);
+        let mut d = EdgeDetector::new(EdgeConfig::default()).unwrap();
+        let (mut first, mut second) = (LaserLine::default(), LaserLine::default());
+        let stats = d.detect_surfaces(&dark.view().unwrap(), &mut first, &mut second).unwrap();
+        assert_eq!((first.found(), second.found(), stats.second), (0, 0, 0));
     }
 
     #[test]

@@ -96,6 +96,84 @@ pub(super) fn extend(
     }
 }
 
+/// What a search for a second sample found.
+pub(super) enum Probe {
+    /// A line at this position across, written into the second line.
+    Found(f32),
+    /// Nothing apart from the first line.
+    Missed,
+    /// The sample's second line is already taken (by another run's walk).
+    Taken,
+}
+
+/// Two surfaces in one row: where an object hides part of the table, the object's line and
+/// the table's overlap by some rows, and the first line holds one of them there (the longer
+/// run's, see [`extend`]). Each run of at least `min_run` samples is followed on beyond its
+/// ends into rows that another run holds, by a search near its own course:
+/// `probe(s, (centre, radius), held)` searches sample `s` near `centre`, away from `held` (the
+/// first line's position there), writes what it finds into the second line, and says so. The walk stops at a row without a first sample (the first line's own extension has
+/// searched it), where the course meets the first line's sample (one line, not two), after
+/// `MAX_GAP + 1` misses, at the range's end, or at a row whose second sample is taken.
+/// Returns the number of second samples written.
+pub(super) fn second_surfaces(
+    line: &LaserLine,
+    cfg: &EdgeConfig,
+    range: Range<u32>,
+    mut probe: impl FnMut(u32, (f32, f32), f32) -> Probe,
+) -> u32 {
+    let mut written = 0;
+    // The walk's own course: (sample, position across), the run's end first.
+    let mut course: Vec<(u32, f32)> = Vec::new();
+    for r in runs(line, range.clone(), cfg.max_jump_px).iter().filter(|r| r.count >= cfg.min_run) {
+        for forward in [false, true] {
+            let mut end = if forward { r.last } else { r.first };
+            course.clear();
+            let back = if forward { end.checked_sub(SLOPE_SPAN) } else { end.checked_add(SLOPE_SPAN) };
+            if let Some(b) = back.filter(|&b| b >= r.first && b <= r.last) {
+                course.push((b, line.across(b as usize)));
+            }
+            course.push((end, line.across(end as usize)));
+            let mut misses = 0u32;
+            loop {
+                let step = misses + 1;
+                let s = if forward { end.checked_add(step) } else { end.checked_sub(step) };
+                let Some(s) = s.filter(|s| range.contains(s)) else { break };
+                let held = line.across(s as usize);
+                if !held.is_finite() {
+                    break;
+                }
+                let at = |k: u32| course.iter().rev().find(|c| c.0 == k).map(|c| c.1);
+                let x = at(end).unwrap_or(f32::NAN);
+                let b = if forward { end.checked_sub(SLOPE_SPAN) } else { end.checked_add(SLOPE_SPAN) };
+                let slope = b
+                    .and_then(at)
+                    .filter(|xb| xb.is_finite())
+                    .map_or(0.0, |xb| ((x - xb) / SLOPE_SPAN as f32).clamp(-cfg.max_jump_px, cfg.max_jump_px));
+                let centre = x + slope * step as f32;
+                let radius = cfg.max_jump_px * step as f32;
+                if (held - centre).abs() <= radius {
+                    break; // the course runs into the first line: one line
+                }
+                match probe(s, (centre, radius), held) {
+                    Probe::Found(pos) => {
+                        course.push((s, pos));
+                        written += 1;
+                        (end, misses) = (s, 0);
+                    }
+                    Probe::Missed => {
+                        misses += 1;
+                        if misses > MAX_GAP {
+                            break;
+                        }
+                    }
+                    Probe::Taken => break,
+                }
+            }
+        }
+    }
+    written
+}
+
 /// Where the run ending at `end` is expected `step` samples further on.
 fn extrapolate(line: &LaserLine, end: u32, forward: bool, step: u32, max_jump_px: f32) -> f32 {
     let x = line.across(end as usize);
