@@ -47,6 +47,14 @@ fn edge_detection(c: &mut Criterion) {
                 b.iter(|| d.detect(black_box(v), &mut out).unwrap())
             });
         }
+        // The same with the second surfaces' line (`detect_surfaces`): what the walk along
+        // each run's ends costs where the line crosses one surface per row.
+        let mut d = EdgeDetector::new(EdgeConfig::default()).unwrap();
+        let (mut out, mut second) = (LaserLine::default(), LaserLine::default());
+        let view = img.view().unwrap();
+        g.bench_function("mono8/center_of_gravity+second_surfaces", |b| {
+            b.iter(|| d.detect_surfaces(black_box(&view), &mut out, &mut second).unwrap())
+        });
         let rgb = scanner(w, h, Encoding::Rgb8).render(0, s.frame_count() / 2);
         let mut d = EdgeDetector::new(EdgeConfig::default()).unwrap();
         let mut out = LaserLine::default();
