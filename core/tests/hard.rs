@@ -271,22 +271,30 @@ fn fast_scan_meshes_its_anisotropic_grid() {
     check(&cams, Bounds { rms_m: 0.00072, beyond_5mm: 0.003, dark_band: 0.38 });
 }
 
-/// Debug aid: where the points beyond 5 mm lie (frame, row, point, distance) after the mesher's
-/// rejection of contradicted points (`RAW=1`: before it). `SCENE`, `W`, `RGB`, `CAM`, `SPEED`.
-#[test]
-#[ignore]
-fn probe_outliers() {
-    let scene = std::env::var("SCENE").unwrap_or("pyramid".into());
-    let w: u32 = std::env::var("W").map_or(320, |v| v.parse().unwrap());
+/// A debug aid's scan, from the environment: `SCENE` and `W` (defaults given), `RGB` (rgb8,
+/// else mono8), `SPEED` (m/s, default 0.07), `CAM` (index, default 0). Returns the scanner, its
+/// rig, the camera and the image height.
+fn probe_scan(scene: &str, w: u32) -> (Scanner, Rig, usize, u32) {
+    let scene = std::env::var("SCENE").unwrap_or(scene.into());
+    let w: u32 = std::env::var("W").map_or(w, |v| v.parse().unwrap());
     let enc = if std::env::var("RGB").is_ok() { Encoding::Rgb8 } else { Encoding::Mono8 };
     let speed: f64 = std::env::var("SPEED").map_or(0.070, |v| v.parse().unwrap());
+    let cam: usize = std::env::var("CAM").map_or(0, |v| v.parse().unwrap());
     let h = w * 3 / 4;
     let rig = Rig::study(w, h);
     let mut settings = ScanSettings { encoding: enc, speed_mps: speed, ..Default::default() };
     Preset::Hard.apply(&mut settings);
     let s = Scanner::new(Scene::by_name(&scene).unwrap(), rig.clone(), Preset::Hard.laser(), settings).unwrap();
+    (s, rig, cam, h)
+}
+
+/// Debug aid: where the points beyond 5 mm lie (frame, row, point, distance) after the mesher's
+/// rejection of contradicted points (`RAW=1`: before it). `SCENE`, `W`, `RGB`, `CAM`, `SPEED`.
+#[test]
+#[ignore]
+fn probe_outliers() {
+    let (s, rig, cam, h) = probe_scan("pyramid", 320);
     let poses = poses_of(&s);
-    let cam: usize = std::env::var("CAM").map_or(0, |v| v.parse().unwrap());
     let tri = Triangulator::new(
         rig.cameras[cam].geometry().unwrap(),
         &TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() },
@@ -351,16 +359,8 @@ fn report() {
 #[test]
 #[ignore]
 fn probe_dark_misses() {
-    let scene = std::env::var("SCENE").unwrap_or("phantom".into());
-    let w: u32 = std::env::var("W").map_or(640, |v| v.parse().unwrap());
-    let enc = if std::env::var("RGB").is_ok() { Encoding::Rgb8 } else { Encoding::Mono8 };
-    let cam: usize = std::env::var("CAM").map_or(0, |v| v.parse().unwrap());
+    let (s, rig, cam, h) = probe_scan("phantom", 640);
     let limit: usize = std::env::var("LIMIT").map_or(40, |v| v.parse().unwrap());
-    let h = w * 3 / 4;
-    let rig = Rig::study(w, h);
-    let mut settings = ScanSettings { encoding: enc, ..Default::default() };
-    Preset::Hard.apply(&mut settings);
-    let s = Scanner::new(Scene::by_name(&scene).unwrap(), rig.clone(), Preset::Hard.laser(), settings).unwrap();
     let geo = rig.cameras[cam].geometry().unwrap();
     let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
     let mut line = LaserLine::default();
@@ -396,7 +396,7 @@ fn probe_dark_misses() {
                 shown += 1;
                 let row = img.view().unwrap();
                 let x0 = (u as i64 - 14).max(0) as u32;
-                let x1 = (u as i64 + 15).min(i64::from(w)) as u32;
+                let x1 = (u as i64 + 15).min(i64::from(h * 4 / 3)) as u32;
                 let vals: Vec<u8> = (x0..x1).map(|x| row.rgb_at(x, v as u32)[0]).collect();
                 eprintln!("frame {f} row {v}: true u {u:.1}, found {found:.1}; from x {x0}: {vals:?}");
             }
@@ -411,15 +411,7 @@ fn probe_dark_misses() {
 #[ignore]
 #[allow(clippy::too_many_lines)]
 fn probe_two_surfaces() {
-    let scene = std::env::var("SCENE").unwrap_or("phantom".into());
-    let w: u32 = std::env::var("W").map_or(640, |v| v.parse().unwrap());
-    let enc = if std::env::var("RGB").is_ok() { Encoding::Rgb8 } else { Encoding::Mono8 };
-    let cam: usize = std::env::var("CAM").map_or(0, |v| v.parse().unwrap());
-    let h = w * 3 / 4;
-    let rig = Rig::study(w, h);
-    let mut settings = ScanSettings { encoding: enc, ..Default::default() };
-    Preset::Hard.apply(&mut settings);
-    let s = Scanner::new(Scene::by_name(&scene).unwrap(), rig.clone(), Preset::Hard.laser(), settings).unwrap();
+    let (s, rig, cam, h) = probe_scan("phantom", 640);
     let geo = rig.cameras[cam].geometry().unwrap();
     let poses = poses_of(&s);
     let tri =
@@ -495,5 +487,5 @@ fn probe_two_surfaces() {
             }
         }
     }
-    eprintln!("{scene} {w} cam{}: {rows_two} of {rows_total} rows cross two surfaces; the first sample is on one of them in {on_first}, the second on the other in {on_second}; {truth_second} truth points beyond each row's first cluster; {second_total} second samples, {second_off} beyond 2 mm", cam + 1);
+    eprintln!("{}x{h} cam{}: {rows_two} of {rows_total} rows cross two surfaces; the first sample is on one of them in {on_first}, the second on the other in {on_second}; {truth_second} truth points beyond each row's first cluster; {second_total} second samples, {second_off} beyond 2 mm", h * 4 / 3, cam + 1);
 }
