@@ -152,6 +152,52 @@ fn ciclop_laser_off_frames_give_no_samples() {
     }
 }
 
+/// The second surfaces' line on real frames: none where there is no laser light (the Ciclop's
+/// laser-off photographs), and where the robot's line steps over a block's edge, a few columns
+/// of the floor's line beside the block's (counted; printed for BENCHMARKS.md).
+#[test]
+fn second_surfaces_on_real_frames() {
+    for name in ["laser_background.png", "pattern-off.png", "texture.png"] {
+        let img = read_frame(&ciclop(name)).unwrap();
+        let mut d = EdgeDetector::new(ciclop_camera(Method::Gaussian)).unwrap();
+        let (mut first, mut second) = (LaserLine::default(), LaserLine::default());
+        d.detect_surfaces(&img.view().unwrap(), &mut first, &mut second).unwrap();
+        assert_eq!((first.found(), second.found()), (0, 0), "{name}");
+    }
+    // The laser-on photograph: where the line steps from one surface to another (rows
+    // 604-612) both are lit, and the second line must lie on laser light, as the on/off pair's
+    // red difference shows it (the detector reads the laser-on image alone).
+    let (on, off) = (read_frame(&ciclop("laser.png")).unwrap(), read_frame(&ciclop("laser_background.png")).unwrap());
+    assert_eq!((on.encoding, off.encoding), (Encoding::Rgb8, Encoding::Rgb8));
+    let mut d = EdgeDetector::new(ciclop_camera(Method::Gaussian)).unwrap();
+    let (mut first, mut second) = (LaserLine::default(), LaserLine::default());
+    d.detect_surfaces(&on.view().unwrap(), &mut first, &mut second).unwrap();
+    let w = on.width as usize;
+    let laser = |y: usize, x: usize| f64::from(on.data[3 * (y * w + x)]) - f64::from(off.data[3 * (y * w + x)]);
+    let rows: Vec<usize> = (0..second.len()).filter(|&y| second.u[y].is_finite()).collect();
+    for &y in &rows {
+        let x = second.u[y].round() as usize;
+        let light = (x.saturating_sub(3)..=(x + 3).min(w - 1)).map(|x| laser(y, x)).fold(f64::MIN, f64::max);
+        eprintln!("ciclop row {y}: second {:.1}, first {:.1}, laser light there {light}", second.u[y], first.u[y]);
+        assert!(light >= 30.0, "row {y}: second sample {:.1} where the on/off difference is {light}", second.u[y]);
+    }
+    eprintln!("ciclop laser-on: {} first samples, {} second", first.found(), rows.len());
+    assert!(rows.len() >= 4, "the step at rows 604-612: {} second samples", rows.len());
+    let (mut firsts, mut seconds) = (0, 0);
+    let mut d = EdgeDetector::new(robot_camera()).unwrap();
+    for n in 2..=86 {
+        d.detect_surfaces(&robot_frame(n).view().unwrap(), &mut first, &mut second).unwrap();
+        // Each second sample at least twice the line's width from the first's.
+        for x in (0..second.len()).filter(|&x| second.v[x].is_finite()) {
+            let apart = (second.v[x] - first.v[x]).abs();
+            assert!(apart >= 2.0 * second.width[x].max(first.width[x]).max(1.0) - 1e-3, "frame {n} column {x}");
+        }
+        firsts += first.found();
+        seconds += second.found();
+    }
+    eprintln!("robot frames 2-86: {firsts} first samples, {seconds} second");
+}
+
 /// The robot's frames: a red line along the image rows (one sample per column), JPEG.
 fn robot_frame(n: u32) -> Image {
     read_frame(&realdata().join(format!("robot-laser/img{n:04}.jpg"))).unwrap()
