@@ -111,25 +111,23 @@ pub(super) enum Probe {
 /// run's, see [`extend`]). Each run of at least `min_run` samples is followed on beyond its
 /// ends into rows that another run holds, by a search near its own course:
 /// `probe(s, (centre, radius), held)` searches sample `s` near `centre`, away from `held` (the
-/// first line's position there), writes what it finds into the second line, and says so. The walk stops at a row without a first sample (the first line's own extension has
+/// first line's position there), writes what it finds into the second line, and says so.
+/// The walk stops at a row without a first sample (the first line's own extension has
 /// searched it), where the course meets the first line's sample (one line, not two), after
 /// `MAX_GAP + 1` misses, at the range's end, or at a row whose second sample is taken.
-/// Returns the number of second samples written.
 pub(super) fn second_surfaces(
     line: &LaserLine,
     cfg: &EdgeConfig,
     range: Range<u32>,
     mut probe: impl FnMut(u32, (f32, f32), f32) -> Probe,
-) -> u32 {
-    let mut written = 0;
+) {
     // The walk's own course: (sample, position across), the run's end first.
     let mut course: Vec<(u32, f32)> = Vec::new();
     for r in runs(line, range.clone(), cfg.max_jump_px).iter().filter(|r| r.count >= cfg.min_run) {
         for forward in [false, true] {
             let mut end = if forward { r.last } else { r.first };
             course.clear();
-            let back = if forward { end.checked_sub(SLOPE_SPAN) } else { end.checked_add(SLOPE_SPAN) };
-            if let Some(b) = back.filter(|&b| b >= r.first && b <= r.last) {
+            if let Some(b) = behind(end, forward).filter(|&b| b >= r.first && b <= r.last) {
                 course.push((b, line.across(b as usize)));
             }
             course.push((end, line.across(end as usize)));
@@ -144,12 +142,7 @@ pub(super) fn second_surfaces(
                 }
                 let at = |k: u32| course.iter().rev().find(|c| c.0 == k).map(|c| c.1);
                 let x = at(end).unwrap_or(f32::NAN);
-                let b = if forward { end.checked_sub(SLOPE_SPAN) } else { end.checked_add(SLOPE_SPAN) };
-                let slope = b
-                    .and_then(at)
-                    .filter(|xb| xb.is_finite())
-                    .map_or(0.0, |xb| ((x - xb) / SLOPE_SPAN as f32).clamp(-cfg.max_jump_px, cfg.max_jump_px));
-                let centre = x + slope * step as f32;
+                let centre = project(x, behind(end, forward).and_then(at), step, cfg.max_jump_px);
                 let radius = cfg.max_jump_px * step as f32;
                 if (held - centre).abs() <= radius {
                     break; // the course runs into the first line: one line
@@ -157,7 +150,6 @@ pub(super) fn second_surfaces(
                 match probe(s, (centre, radius), held) {
                     Probe::Found(pos) => {
                         course.push((s, pos));
-                        written += 1;
                         (end, misses) = (s, 0);
                     }
                     Probe::Missed => {
@@ -171,16 +163,27 @@ pub(super) fn second_surfaces(
             }
         }
     }
-    written
 }
 
 /// Where the run ending at `end` is expected `step` samples further on.
 fn extrapolate(line: &LaserLine, end: u32, forward: bool, step: u32, max_jump_px: f32) -> f32 {
-    let x = line.across(end as usize);
-    let back = if forward { end.checked_sub(SLOPE_SPAN) } else { end.checked_add(SLOPE_SPAN) };
+    let back = behind(end, forward).filter(|&b| (b as usize) < line.len()).map(|b| line.across(b as usize));
+    project(line.across(end as usize), back, step, max_jump_px)
+}
+
+/// The sample `SLOPE_SPAN` behind `end` (before it when walking forward).
+fn behind(end: u32, forward: bool) -> Option<u32> {
+    if forward {
+        end.checked_sub(SLOPE_SPAN)
+    } else {
+        end.checked_add(SLOPE_SPAN)
+    }
+}
+
+/// A course at `x` whose position `SLOPE_SPAN` samples behind was `back` (none or NaN: a flat
+/// course), `step` samples further on; its slope at most `max_jump_px` a sample.
+fn project(x: f32, back: Option<f32>, step: u32, max_jump_px: f32) -> f32 {
     let slope = back
-        .filter(|&b| (b as usize) < line.len())
-        .map(|b| line.across(b as usize))
         .filter(|xb| xb.is_finite())
         .map_or(0.0, |xb| ((x - xb) / SLOPE_SPAN as f32).clamp(-max_jump_px, max_jump_px));
     x + slope * step as f32
