@@ -203,6 +203,29 @@ const WIDTH_TOLERANCE: f32 = 1.6;
 /// The least excess width (pixels) that rejects a sample: a line under a pixel wide measures
 /// one to two pixels wide as its sub-pixel phase changes along the run, which is no mixture.
 const WIDTH_EXCESS_PX: f32 = 1.5;
+/// A sample of a kept run narrower than this fraction of the run's median width (and
+/// `NARROW_DEFICIT_PX` narrower, and narrower than `narrow_width_px`) is the sheet cut by an
+/// edge parallel to the line (the first or last frame on an object, a dark/bright edge under
+/// the sheet): what is seen is a sliver of the sheet, its centre on the sliver, not on the
+/// sheet. On the hard phantom at 640x480 such samples, 0.9-1.6 px wide in runs of 2.8, lay 1-5
+/// mm off in whole stretches of one frame, and carried half of the squared error.
+const NARROW_TOLERANCE: f32 = 0.6;
+/// The least deficit (pixels) that rejects a narrow sample: a line under a pixel wide measures
+/// one to two pixels wide as its phase changes along the run, which is no sliver.
+const NARROW_DEFICIT_PX: f32 = 1.1;
+/// A narrow sample at least this fraction of its run's median strength is a sliver. A dim line
+/// on dark print (reflectance 0.15) measures as narrow as a sliver beside a saturated run, but
+/// at 0.12-0.57 of its strength (the hard pyramid at 640x480, grey), while the phantom's
+/// slivers lie at 0.2-1.1 of theirs.
+const SLIVER_STRENGTH: f32 = 0.5;
+/// A weaker narrow sample is a sliver where it lies this far (pixels) off the straight line
+/// between the run's nearest samples of the line's own width on each side (or has none on a
+/// side within `SLIVER_SPAN`): a sliver's centre is the sliver's, off the sheet's, while a
+/// dim line on dark print stays on course (0.15 px median, 0.4 px at the 90th percentile, on
+/// the hard pyramid; the phantom's weak slivers 0.35-0.58 px median, or at a run's end).
+const SLIVER_OFF_COURSE_PX: f32 = 0.5;
+/// Samples on each side of a narrow sample within which its course's neighbours are sought.
+const SLIVER_SPAN: u32 = 40;
 /// A sample too wide for its run is dropped only if its centre is also this fraction of its
 /// width off the course of its neighbours: two surfaces merged into one peak pull its centre
 /// aside, while a real line that merely widens (blooming on a bright floor) stays on course.
@@ -214,21 +237,30 @@ const OFF_COURSE_PER_WIDTH: f32 = 0.1;
 const COURSE_SPAN: u32 = 3;
 
 /// How far (pixels) sample `s` of run `r` lies from the straight line between its nearest
-/// neighbours of the run on each side (within `COURSE_SPAN`, found and at most `max_width`
-/// wide); `None` where a side has none.
-fn off_course(line: &LaserLine, r: &Run, s: u32, max_width: f32) -> Option<f32> {
+/// neighbours of the run on each side (within `span` samples, found and of a width that
+/// `eligible` accepts); `None` where a side has none.
+fn off_course(line: &LaserLine, r: &Run, s: u32, span: u32, eligible: impl Fn(f32) -> bool) -> Option<f32> {
     let neighbour = |forward: bool| {
-        (1..=COURSE_SPAN).find_map(|k| {
+        (1..=span).find_map(|k| {
             let t = if forward { s.checked_add(k)? } else { s.checked_sub(k)? };
             if !(r.first..=r.last).contains(&t) {
                 return None;
             }
             let x = line.across(t as usize);
-            (x.is_finite() && line.width[t as usize] <= max_width).then_some((t as f32, x))
+            (x.is_finite() && eligible(line.width[t as usize])).then_some((t as f32, x))
         })
     };
     let ((a, xa), (b, xb)) = (neighbour(false)?, neighbour(true)?);
     Some((line.across(s as usize) - (xa + (xb - xa) * (s as f32 - a) / (b - a))).abs())
+}
+
+/// The median strength of run `r`'s samples.
+fn median_strength(line: &LaserLine, r: &Run, scratch: &mut Vec<f32>) -> f32 {
+    scratch.clear();
+    scratch
+        .extend((r.first..=r.last).filter(|&s| line.across(s as usize).is_finite()).map(|s| line.strength[s as usize]));
+    let mid = scratch.len() / 2;
+    scratch.select_nth_unstable_by(mid, f32::total_cmp).1.to_owned()
 }
 
 /// A short run this many times wider than the line's typical width is not the line: a
@@ -271,7 +303,8 @@ fn faded_body(line: &LaserLine, r: &Run, scratch: &mut Vec<f32>) -> Option<usize
 }
 
 /// Clears every run shorter than `min_run`, the samples of a kept run more than
-/// `WIDTH_TOLERANCE` times its median width (and `WIDTH_EXCESS_PX` more), every short run
+/// `WIDTH_TOLERANCE` times its median width (and `WIDTH_EXCESS_PX` more) and off its course, or
+/// less than `NARROW_TOLERANCE` times it (a sliver of the sheet), every short run
 /// (under `BLOB_RUNS` times `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean
 /// width, and every run that fades out at both ends with a body shorter than
 /// `BODY_LENGTH_PER_WIDTH` times its mean width (a highlight, before any frame has shown the
@@ -306,13 +339,33 @@ pub(super) fn drop_short_runs(
             scratch.extend((r.first..=r.last).map(|s| line.width[s as usize]).filter(|w| *w > 0.0));
             let mid = scratch.len() / 2;
             let median = *scratch.select_nth_unstable_by(mid, f32::total_cmp).1;
+            let mut strength = None;
             for s in r.first..=r.last {
                 let w = line.width[s as usize];
-                if w > WIDTH_TOLERANCE * median
+                let wide = w > WIDTH_TOLERANCE * median
                     && w > median + WIDTH_EXCESS_PX
+                    && off_course(line, &r, s, COURSE_SPAN, |v| v <= WIDTH_TOLERANCE * median)
+                        .is_none_or(|d| d > OFF_COURSE_PER_WIDTH * w);
+                // A sliver of the sheet, cut by an edge parallel to the line: as narrow as the
+                // optics allow (under `narrow_width_px`; a wide saturated line's narrower rows
+                // are its top above a shoulder, not a sliver), in a run whose line is wider,
+                // and either about as strong as the run or off the course of the run's
+                // line on both sides (a dim line on dark print is narrower than a saturated
+                // run too, but it is weak and stays on course).
+                let narrow = w > 0.0
+                    && w < cfg.narrow_width_px
+                    && w < NARROW_TOLERANCE * median
+                    && w < median - NARROW_DEFICIT_PX
                     && line.across(s as usize).is_finite()
-                    && off_course(line, &r, s, WIDTH_TOLERANCE * median).is_none_or(|d| d > OFF_COURSE_PER_WIDTH * w)
-                {
+                    && (line.strength[s as usize]
+                        >= SLIVER_STRENGTH * *strength.get_or_insert_with(|| median_strength(line, &r, scratch))
+                        || off_course(line, &r, s, SLIVER_SPAN, |v| {
+                            v >= cfg.narrow_width_px
+                                || v >= NARROW_TOLERANCE * median
+                                || v >= median - NARROW_DEFICIT_PX
+                        })
+                        .is_none_or(|d| d > SLIVER_OFF_COURSE_PX));
+                if (wide || narrow) && line.across(s as usize).is_finite() {
                     line.clear(s as usize);
                     dropped += 1;
                 }
@@ -379,5 +432,46 @@ mod tests {
         let mut l = line(&(0..60).map(|i| if i % 3 == 0 { 2.1 } else { 1.0 }).collect::<Vec<_>>());
         assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
         assert_eq!(l.found(), 60);
+    }
+
+    #[test]
+    fn a_sliver_of_the_sheet_is_dropped_but_a_thin_or_a_wide_lines_or_a_dim_lines_narrower_rows_are_not() {
+        let cfg = EdgeConfig::default();
+        let mut scratch = Vec::new();
+        // A line 2.8 px wide whose rows 20-24 see a sliver of the sheet cut by an edge (1.1 px):
+        // dropped. Rows 1.8 px wide (0.64 of the median) are kept.
+        let mut widths = vec![2.8; 60];
+        widths[20..25].fill(1.1);
+        widths[40] = 1.8;
+        let mut l = line(&widths);
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 5);
+        assert!((20..25).all(|i| !l.u[i].is_finite()) && l.u[40].is_finite() && l.found() == 55);
+        // A thin line's phase (1 to 2 px along the run, median 2): kept.
+        let mut l = line(&(0..60).map(|i| if i % 3 == 0 { 1.0 } else { 2.0 }).collect::<Vec<_>>());
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
+        // A wide saturated line (12 px) measured 5 px where only its top stands above a
+        // shoulder: kept (wider than `narrow_width_px`, no sliver).
+        let mut widths = vec![12.0; 60];
+        widths[30..33].fill(5.0);
+        let mut l = line(&widths);
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
+        // A dim line on dark print (rows 20-31 at a fifth of the run's strength, 1.4 px in a
+        // saturated run of 2.8) stays on the line's course: kept.
+        let mut widths = vec![2.8; 60];
+        widths[20..32].fill(1.4);
+        let mut l = line(&widths);
+        l.strength[20..32].fill(30.0);
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
+        // The same weak, narrow rows 0.8 px off that course (a faint sliver's centre): dropped,
+        // and so are such rows at the run's end, with no course beyond them.
+        for i in 20..32 {
+            l.u[i] += 0.8;
+        }
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 12);
+        let mut widths = vec![2.8; 60];
+        widths[52..].fill(1.4);
+        let mut l = line(&widths);
+        l.strength[52..].fill(30.0);
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 8);
     }
 }
