@@ -224,6 +224,17 @@ const SLIVER_STRENGTH: f32 = 0.5;
 /// dim line on dark print stays on course (0.15 px median, 0.4 px at the 90th percentile, on
 /// the hard pyramid; the phantom's weak slivers 0.35-0.58 px median, or at a run's end).
 const SLIVER_OFF_COURSE_PX: f32 = 0.5;
+/// A sample under `SLIVER_STRENGTH` of its run's median strength, whatever its width, is dropped
+/// where it lies this far (pixels) off the straight line between the run's nearest samples of
+/// at least that strength on each side (within `SLIVER_SPAN`): light of the sheet's tail on a
+/// surface just off the sheet (the hard phantom at 640x480 in colour: stretches 1-2 px wide at
+/// 0.1-0.4 of the run's strength, 1 px off course, 3-4 mm off the surface).
+const WEAK_OFF_COURSE_PX: f32 = 0.7;
+/// ... but not more than this many times the run's median width off it: the sheet's tail lies
+/// within about the line's width of the sheet, and farther off a straight course is the course
+/// itself bending between the strong samples (the hard pyramid at 320x240 in colour: its dim
+/// line on the print, right but 8-12 px off the straight line across a corner).
+const WEAK_REACH_WIDTHS: f32 = 2.0;
 /// Samples on each side of a narrow sample within which its course's neighbours are sought.
 const SLIVER_SPAN: u32 = 40;
 /// A sample too wide for its run is dropped only if its centre is also this fraction of its
@@ -237,9 +248,9 @@ const OFF_COURSE_PER_WIDTH: f32 = 0.1;
 const COURSE_SPAN: u32 = 3;
 
 /// How far (pixels) sample `s` of run `r` lies from the straight line between its nearest
-/// neighbours of the run on each side (within `span` samples, found and of a width that
-/// `eligible` accepts); `None` where a side has none.
-fn off_course(line: &LaserLine, r: &Run, s: u32, span: u32, eligible: impl Fn(f32) -> bool) -> Option<f32> {
+/// neighbours of the run on each side (within `span` samples, found and accepted by
+/// `eligible`, given the sample's index); `None` where a side has none.
+fn off_course(line: &LaserLine, r: &Run, s: u32, span: u32, eligible: impl Fn(usize) -> bool) -> Option<f32> {
     let neighbour = |forward: bool| {
         (1..=span).find_map(|k| {
             let t = if forward { s.checked_add(k)? } else { s.checked_sub(k)? };
@@ -247,7 +258,7 @@ fn off_course(line: &LaserLine, r: &Run, s: u32, span: u32, eligible: impl Fn(f3
                 return None;
             }
             let x = line.across(t as usize);
-            (x.is_finite() && eligible(line.width[t as usize])).then_some((t as f32, x))
+            (x.is_finite() && eligible(t as usize)).then_some((t as f32, x))
         })
     };
     let ((a, xa), (b, xb)) = (neighbour(false)?, neighbour(true)?);
@@ -344,7 +355,7 @@ pub(super) fn drop_short_runs(
                 let w = line.width[s as usize];
                 let wide = w > WIDTH_TOLERANCE * median
                     && w > median + WIDTH_EXCESS_PX
-                    && off_course(line, &r, s, COURSE_SPAN, |v| v <= WIDTH_TOLERANCE * median)
+                    && off_course(line, &r, s, COURSE_SPAN, |t| line.width[t] <= WIDTH_TOLERANCE * median)
                         .is_none_or(|d| d > OFF_COURSE_PER_WIDTH * w);
                 // A sliver of the sheet, cut by an edge parallel to the line: as narrow as the
                 // optics allow (under `narrow_width_px`; a wide saturated line's narrower rows
@@ -359,13 +370,22 @@ pub(super) fn drop_short_runs(
                     && line.across(s as usize).is_finite()
                     && (line.strength[s as usize]
                         >= SLIVER_STRENGTH * *strength.get_or_insert_with(|| median_strength(line, &r, scratch))
-                        || off_course(line, &r, s, SLIVER_SPAN, |v| {
+                        || off_course(line, &r, s, SLIVER_SPAN, |t| {
+                            let v = line.width[t];
                             v >= cfg.narrow_width_px
                                 || v >= NARROW_TOLERANCE * median
                                 || v >= median - NARROW_DEFICIT_PX
                         })
                         .is_none_or(|d| d > SLIVER_OFF_COURSE_PX));
-                if (wide || narrow) && line.across(s as usize).is_finite() {
+                // A weak sample (any width) well off the course of the run's strong samples on
+                // both sides: the sheet's tail on a surface the sheet itself misses.
+                let weak = line.across(s as usize).is_finite() && {
+                    let st = *strength.get_or_insert_with(|| median_strength(line, &r, scratch));
+                    line.strength[s as usize] < SLIVER_STRENGTH * st
+                        && off_course(line, &r, s, SLIVER_SPAN, |t| line.strength[t] >= SLIVER_STRENGTH * st)
+                            .is_some_and(|d| d > WEAK_OFF_COURSE_PX && d < WEAK_REACH_WIDTHS * median)
+                };
+                if (wide || narrow || weak) && line.across(s as usize).is_finite() {
                     line.clear(s as usize);
                     dropped += 1;
                 }
@@ -473,5 +493,29 @@ mod tests {
         let mut l = line(&widths);
         l.strength[52..].fill(30.0);
         assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 8);
+    }
+
+    #[test]
+    fn a_weak_stretch_off_the_course_of_the_strong_line_is_dropped() {
+        let cfg = EdgeConfig::default();
+        let mut scratch = Vec::new();
+        // Rows 20-31 of a run 2.8 px wide at a fifth of its strength, as wide as the run (no
+        // sliver): 0.5 px off the strong line's course is kept (a dim line on a darker
+        // surface), 1 px off is dropped (the sheet's tail on a surface off the sheet).
+        for (shift, dropped) in [(0.5, 0), (1.0, 12)] {
+            let mut l = line(&[2.8; 60]);
+            l.strength[20..32].fill(30.0);
+            for i in 20..32 {
+                l.u[i] += shift;
+            }
+            assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), dropped, "shift {shift}");
+        }
+        // The same stretch at the run's end (no strong course beyond it): kept.
+        let mut l = line(&[2.8; 60]);
+        l.strength[48..].fill(30.0);
+        for i in 48..60 {
+            l.u[i] += 1.0;
+        }
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
     }
 }
