@@ -421,6 +421,18 @@ mod tests {
         }
     }
 
+    /// A line 2.8 px wide and 60 rows long (`line`) whose rows `rows` are `width` wide, of
+    /// strength 30 (a fifth of the rest) and `shift` px off its course.
+    fn weak_stretch(rows: std::ops::Range<usize>, width: f32, shift: f32) -> LaserLine {
+        let mut l = line(&[2.8; 60]);
+        l.width[rows.clone()].fill(width);
+        l.strength[rows.clone()].fill(30.0);
+        for u in &mut l.u[rows] {
+            *u += shift;
+        }
+        l
+    }
+
     #[test]
     fn a_sample_much_wider_than_its_run_and_off_its_course_is_dropped_but_a_thin_lines_phase_is_not() {
         let cfg = EdgeConfig::default();
@@ -476,23 +488,13 @@ mod tests {
         let mut l = line(&widths);
         assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
         // A dim line on dark print (rows 20-31 at a fifth of the run's strength, 1.4 px in a
-        // saturated run of 2.8) stays on the line's course: kept.
-        let mut widths = vec![2.8; 60];
-        widths[20..32].fill(1.4);
-        let mut l = line(&widths);
-        l.strength[20..32].fill(30.0);
-        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
-        // The same weak, narrow rows 0.8 px off that course (a faint sliver's centre): dropped,
-        // and so are such rows at the run's end, with no course beyond them.
-        for i in 20..32 {
-            l.u[i] += 0.8;
+        // saturated run of 2.8) stays on the line's course: kept. The same rows 0.8 px off that
+        // course (a faint sliver's centre) are dropped, and so are such rows at the run's end,
+        // with no course beyond them.
+        for (rows, shift, dropped) in [(20..32, 0.0, 0), (20..32, 0.8, 12), (52..60, 0.0, 8)] {
+            let mut l = weak_stretch(rows, 1.4, shift);
+            assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), dropped, "shift {shift}");
         }
-        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 12);
-        let mut widths = vec![2.8; 60];
-        widths[52..].fill(1.4);
-        let mut l = line(&widths);
-        l.strength[52..].fill(30.0);
-        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 8);
     }
 
     #[test]
@@ -501,21 +503,11 @@ mod tests {
         let mut scratch = Vec::new();
         // Rows 20-31 of a run 2.8 px wide at a fifth of its strength, as wide as the run (no
         // sliver): 0.5 px off the strong line's course is kept (a dim line on a darker
-        // surface), 1 px off is dropped (the sheet's tail on a surface off the sheet).
-        for (shift, dropped) in [(0.5, 0), (1.0, 12)] {
-            let mut l = line(&[2.8; 60]);
-            l.strength[20..32].fill(30.0);
-            for i in 20..32 {
-                l.u[i] += shift;
-            }
+        // surface), 1 px off is dropped (the sheet's tail on a surface off the sheet). The same
+        // stretch at the run's end (no strong course beyond it): kept.
+        for (rows, shift, dropped) in [(20..32, 0.5, 0), (20..32, 1.0, 12), (48..60, 1.0, 0)] {
+            let mut l = weak_stretch(rows, 2.8, shift);
             assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), dropped, "shift {shift}");
         }
-        // The same stretch at the run's end (no strong course beyond it): kept.
-        let mut l = line(&[2.8; 60]);
-        l.strength[48..].fill(30.0);
-        for i in 48..60 {
-            l.u[i] += 1.0;
-        }
-        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 0);
     }
 }
