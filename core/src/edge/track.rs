@@ -350,26 +350,35 @@ pub(super) fn drop_short_runs(
             scratch.extend((r.first..=r.last).map(|s| line.width[s as usize]).filter(|w| *w > 0.0));
             let mid = scratch.len() / 2;
             let median = *scratch.select_nth_unstable_by(mid, f32::total_cmp).1;
-            let mut strength = None;
+            // A sliver of the sheet, cut by an edge parallel to the line: as narrow as the
+            // optics allow (under `narrow_width_px`; a wide saturated line's narrower rows are
+            // its top above a shoulder, not a sliver), in a run whose line is wider.
+            let narrow_width = |w: f32| {
+                w > 0.0 && w < cfg.narrow_width_px && w < NARROW_TOLERANCE * median && w < median - NARROW_DEFICIT_PX
+            };
+            // The run's median strength, taken (before any sample is cleared) only where a sample
+            // is narrow or under half the run's maximum strength (the median is at most the
+            // maximum): NaN otherwise, and then never read.
+            let strongest = (r.first..=r.last).map(|s| line.strength[s as usize]).fold(0.0, f32::max);
+            let strength = if (r.first..=r.last).any(|s| {
+                line.strength[s as usize] < SLIVER_STRENGTH * strongest || narrow_width(line.width[s as usize])
+            }) {
+                median_strength(line, &r, scratch)
+            } else {
+                f32::NAN
+            };
             for s in r.first..=r.last {
                 let w = line.width[s as usize];
                 let wide = w > WIDTH_TOLERANCE * median
                     && w > median + WIDTH_EXCESS_PX
                     && off_course(line, &r, s, COURSE_SPAN, |t| line.width[t] <= WIDTH_TOLERANCE * median)
                         .is_none_or(|d| d > OFF_COURSE_PER_WIDTH * w);
-                // A sliver of the sheet, cut by an edge parallel to the line: as narrow as the
-                // optics allow (under `narrow_width_px`; a wide saturated line's narrower rows
-                // are its top above a shoulder, not a sliver), in a run whose line is wider,
-                // and either about as strong as the run or off the course of the run's
-                // line on both sides (a dim line on dark print is narrower than a saturated
-                // run too, but it is weak and stays on course).
-                let narrow = w > 0.0
-                    && w < cfg.narrow_width_px
-                    && w < NARROW_TOLERANCE * median
-                    && w < median - NARROW_DEFICIT_PX
+                // A sliver is either about as strong as the run or off the course of the run's
+                // line on both sides (a dim line on dark print is narrower than a saturated run
+                // too, but it is weak and stays on course).
+                let narrow = narrow_width(w)
                     && line.across(s as usize).is_finite()
-                    && (line.strength[s as usize]
-                        >= SLIVER_STRENGTH * *strength.get_or_insert_with(|| median_strength(line, &r, scratch))
+                    && (line.strength[s as usize] >= SLIVER_STRENGTH * strength
                         || off_course(line, &r, s, SLIVER_SPAN, |t| {
                             let v = line.width[t];
                             v >= cfg.narrow_width_px
@@ -379,12 +388,10 @@ pub(super) fn drop_short_runs(
                         .is_none_or(|d| d > SLIVER_OFF_COURSE_PX));
                 // A weak sample (any width) well off the course of the run's strong samples on
                 // both sides: the sheet's tail on a surface the sheet itself misses.
-                let weak = line.across(s as usize).is_finite() && {
-                    let st = *strength.get_or_insert_with(|| median_strength(line, &r, scratch));
-                    line.strength[s as usize] < SLIVER_STRENGTH * st
-                        && off_course(line, &r, s, SLIVER_SPAN, |t| line.strength[t] >= SLIVER_STRENGTH * st)
-                            .is_some_and(|d| d > WEAK_OFF_COURSE_PX && d < WEAK_REACH_WIDTHS * median)
-                };
+                let weak = line.across(s as usize).is_finite()
+                    && line.strength[s as usize] < SLIVER_STRENGTH * strength
+                    && off_course(line, &r, s, SLIVER_SPAN, |t| line.strength[t] >= SLIVER_STRENGTH * strength)
+                        .is_some_and(|d| d > WEAK_OFF_COURSE_PX && d < WEAK_REACH_WIDTHS * median);
                 if (wide || narrow || weak) && line.across(s as usize).is_finite() {
                     line.clear(s as usize);
                     dropped += 1;
