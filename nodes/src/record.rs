@@ -24,7 +24,8 @@ pub struct RecordOptions {
     /// Stop after this long (else on SIGINT/SIGTERM).
     pub duration_s: Option<f64>,
     /// One bag per scan, `DIR/scan_<id>` (START to END or ABORT, from `/scan/events`), each
-    /// beginning with the last `/tf_static` and `/tf` heard before it; nothing is recorded
+    /// beginning with the last `/tf_static` and `/tf` heard before it (the `/tf` only if stamped
+    /// at or before the START); nothing is recorded
     /// between scans.
     pub split_by_scan: bool,
 }
@@ -38,8 +39,11 @@ struct Sink {
     writer: Option<BagWriter>,
     /// Every topic added so far: name, type, definition, QoS (each new bag gets them all).
     topics: Vec<(String, String, String, Qos)>,
-    /// With `split`, the last `/tf_static` and `/tf` heard, written first into each scan's bag.
-    preroll: BTreeMap<String, Vec<u8>>,
+    /// With `split`, the last `/tf_static` and `/tf` heard (with the stamp), written first into
+    /// each scan's bag: `/tf` only if stamped at or before the scan's START (the last one heard
+    /// may be a later scan's or another play's, when this scan's earliest transforms arrive
+    /// after its START event; a reader would then meet a transform from after the scan first).
+    preroll: BTreeMap<String, (Option<i64>, Vec<u8>)>,
     /// With `split`, between scans: the last `GRACE_NS` of messages (arrival ns, topic, stamp,
     /// CDR), so that a frame stamped after START that arrives before the START event (another
     /// DDS reader) still goes into the scan's bag.
@@ -106,8 +110,10 @@ impl Sink {
             for (t, ty, def, qos) in &self.topics {
                 w.add_topic(t, ty, def, qos)?;
             }
-            for (t, d) in &self.preroll {
-                w.write(t, now, now, d)?;
+            for (t, (stamp, d)) in &self.preroll {
+                if t == "/tf_static" || stamp.is_none_or(|s| s <= start_ns) {
+                    w.write(t, now, now, d)?;
+                }
             }
             // What arrived before the event but belongs to the scan.
             for (at, t, stamp, d) in self.recent.drain(..) {
@@ -119,7 +125,7 @@ impl Sink {
             self.writer = Some(w);
         }
         if topic == "/tf_static" || topic == "/tf" {
-            self.preroll.insert(topic.to_string(), data.clone());
+            self.preroll.insert(topic.to_string(), (m.stamp_ns(), data.clone()));
         }
         match &mut self.writer {
             Some(w) => w.write(topic, now, now, &data)?,
@@ -270,4 +276,73 @@ pub fn record(dir: &Path, opts: &RecordOptions) -> anyhow::Result<u64> {
     sink.close().with_context(|| stopped(dir, written))?;
     stop.store(true, Ordering::SeqCst);
     Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use xsurf_msgs::builtin_interfaces::Time;
+    use xsurf_msgs::geometry_msgs::TransformStamped;
+    use xsurf_msgs::std_msgs::Header;
+    use xsurf_msgs::tf2_msgs::TFMessage;
+    use xsurf_msgs::xsurf_msgs::ScanEvent;
+
+    fn header(stamp_ns: i64) -> Header {
+        Header { stamp: Time::from_nanos(stamp_ns), frame_id: "table".into() }
+    }
+
+    fn tf(stamp_ns: i64) -> Msg {
+        let t = TransformStamped { header: header(stamp_ns), child_frame_id: "carm".into(), ..Default::default() };
+        Msg::Tf(Arc::new(TFMessage { transforms: vec![t] }))
+    }
+
+    fn event(stamp_ns: i64, event: u8) -> Msg {
+        Msg::ScanEvent(Arc::new(ScanEvent { header: header(stamp_ns), scan_id: 1, event }))
+    }
+
+    /// The stamps of a bag's `/tf`, in the order written.
+    fn tf_stamps(dir: &Path) -> Vec<i64> {
+        let bag = xsurf_formats::bag::Bag::open(dir).unwrap();
+        bag.messages()
+            .map(Result::unwrap)
+            .filter(|m| m.topic == "/tf")
+            .map(|m| match Msg::decode("tf2_msgs/msg/TFMessage", &m.data).unwrap() {
+                Msg::Tf(t) => t.transforms[0].header.stamp.nanos(),
+                _ => unreachable!(),
+            })
+            .collect()
+    }
+
+    /// A bag played twice: the second scan's START arrives before its own earliest transforms
+    /// (another DDS writer), so the last `/tf` heard is the first play's, stamped after the
+    /// second scan's START. The second scan's bag must not begin with it.
+    #[test]
+    fn a_scans_bag_begins_with_no_transform_from_after_its_start() {
+        let dir = std::env::temp_dir().join(format!("xsurf-record-preroll-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut sink = Sink::new(&dir, BagOptions { zstd: false }, true).unwrap();
+        sink.add_topic("/tf", "tf2_msgs/msg/TFMessage", "", Qos::RELIABLE).unwrap();
+        sink.add_topic("/scan/events", "xsurf_msgs/msg/ScanEvent", "", Qos::RELIABLE).unwrap();
+        let s: i64 = 1_000_000_000;
+        let mut now: u64 = 5_000_000_000;
+        let mut put = |sink: &mut Sink, topic: &str, m: Msg, dt: u64| {
+            now += dt;
+            sink.write(topic, now, &m).unwrap();
+        };
+        // First play: a transform before START, the scan, END.
+        put(&mut sink, "/tf", tf(90 * s / 100), 0);
+        put(&mut sink, "/scan/events", event(95 * s / 100, ScanEvent::START), 10_000_000);
+        put(&mut sink, "/tf", tf(2 * s), 10_000_000);
+        put(&mut sink, "/scan/events", event(26 * s / 10, ScanEvent::END), 10_000_000);
+        put(&mut sink, "/tf", tf(267 * s / 100), 10_000_000);
+        // Second play, 3 s on: START first, then its earlier transforms.
+        put(&mut sink, "/scan/events", event(95 * s / 100, ScanEvent::START), 3_000_000_000);
+        put(&mut sink, "/tf", tf(90 * s / 100), 3_000_000);
+        put(&mut sink, "/tf", tf(2 * s), 10_000_000);
+        sink.close().unwrap();
+        // The first bag also holds the transform heard within its grace after END.
+        assert_eq!(tf_stamps(&dir.join("scan_1")), [90 * s / 100, 2 * s, 267 * s / 100]);
+        assert_eq!(tf_stamps(&dir.join("scan_1_2")), [90 * s / 100, 2 * s]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
