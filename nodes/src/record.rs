@@ -25,8 +25,7 @@ pub struct RecordOptions {
     pub duration_s: Option<f64>,
     /// One bag per scan, `DIR/scan_<id>` (START to END or ABORT, from `/scan/events`), each
     /// beginning with the last `/tf_static` and `/tf` heard before it (the `/tf` only if stamped
-    /// at or before the START); nothing is recorded
-    /// between scans.
+    /// at or before the START); nothing is recorded between scans.
     pub split_by_scan: bool,
 }
 

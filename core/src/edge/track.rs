@@ -222,7 +222,7 @@ const SLIVER_STRENGTH: f32 = 0.5;
 /// between the run's nearest samples of the line's own width on each side (or has none on a
 /// side within `SLIVER_SPAN`): a sliver's centre is the sliver's, off the sheet's, while a
 /// dim line on dark print stays on course (0.15 px median, 0.4 px at the 90th percentile, on
-/// the hard pyramid; the phantom's weak slivers 0.35-0.58 px median, or at a run's end).
+/// the hard pyramid; the phantom's weak slivers 0.43 / 0.35 px median, or at a run's end).
 const SLIVER_OFF_COURSE_PX: f32 = 0.5;
 /// A sample under `SLIVER_STRENGTH` of its run's median strength, whatever its width, is dropped
 /// where it lies this far (pixels) off the straight line between the run's nearest samples of
@@ -315,7 +315,9 @@ fn faded_body(line: &LaserLine, r: &Run, scratch: &mut Vec<f32>) -> Option<usize
 
 /// Clears every run shorter than `min_run`, the samples of a kept run more than
 /// `WIDTH_TOLERANCE` times its median width (and `WIDTH_EXCESS_PX` more) and off its course, or
-/// less than `NARROW_TOLERANCE` times it (a sliver of the sheet), every short run
+/// less than `NARROW_TOLERANCE` times it (a sliver of the sheet, see `SLIVER_STRENGTH`), or
+/// under `SLIVER_STRENGTH` of its median strength and off the course of its strong samples
+/// (`WEAK_OFF_COURSE_PX`), every short run
 /// (under `BLOB_RUNS` times `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean
 /// width, and every run that fades out at both ends with a body shorter than
 /// `BODY_LENGTH_PER_WIDTH` times its mean width (a highlight, before any frame has shown the
@@ -353,9 +355,9 @@ pub(super) fn drop_short_runs(
             // A sliver of the sheet, cut by an edge parallel to the line: as narrow as the
             // optics allow (under `narrow_width_px`; a wide saturated line's narrower rows are
             // its top above a shoulder, not a sliver), in a run whose line is wider.
-            let narrow_width = |w: f32| {
-                w > 0.0 && w < cfg.narrow_width_px && w < NARROW_TOLERANCE * median && w < median - NARROW_DEFICIT_PX
-            };
+            let narrower =
+                |w: f32| w < cfg.narrow_width_px && w < NARROW_TOLERANCE * median && w < median - NARROW_DEFICIT_PX;
+            let narrow_width = |w: f32| w > 0.0 && narrower(w);
             // The run's median strength, taken (before any sample is cleared) only where a sample
             // is narrow or under half the run's maximum strength (the median is at most the
             // maximum): NaN otherwise, and then never read.
@@ -368,6 +370,9 @@ pub(super) fn drop_short_runs(
                 f32::NAN
             };
             for s in r.first..=r.last {
+                if !line.across(s as usize).is_finite() {
+                    continue;
+                }
                 let w = line.width[s as usize];
                 let wide = w > WIDTH_TOLERANCE * median
                     && w > median + WIDTH_EXCESS_PX
@@ -377,22 +382,15 @@ pub(super) fn drop_short_runs(
                 // line on both sides (a dim line on dark print is narrower than a saturated run
                 // too, but it is weak and stays on course).
                 let narrow = narrow_width(w)
-                    && line.across(s as usize).is_finite()
                     && (line.strength[s as usize] >= SLIVER_STRENGTH * strength
-                        || off_course(line, &r, s, SLIVER_SPAN, |t| {
-                            let v = line.width[t];
-                            v >= cfg.narrow_width_px
-                                || v >= NARROW_TOLERANCE * median
-                                || v >= median - NARROW_DEFICIT_PX
-                        })
-                        .is_none_or(|d| d > SLIVER_OFF_COURSE_PX));
+                        || off_course(line, &r, s, SLIVER_SPAN, |t| !narrower(line.width[t]))
+                            .is_none_or(|d| d > SLIVER_OFF_COURSE_PX));
                 // A weak sample (any width) well off the course of the run's strong samples on
                 // both sides: the sheet's tail on a surface the sheet itself misses.
-                let weak = line.across(s as usize).is_finite()
-                    && line.strength[s as usize] < SLIVER_STRENGTH * strength
+                let weak = line.strength[s as usize] < SLIVER_STRENGTH * strength
                     && off_course(line, &r, s, SLIVER_SPAN, |t| line.strength[t] >= SLIVER_STRENGTH * strength)
                         .is_some_and(|d| d > WEAK_OFF_COURSE_PX && d < WEAK_REACH_WIDTHS * median);
-                if (wide || narrow || weak) && line.across(s as usize).is_finite() {
+                if wide || narrow || weak {
                     line.clear(s as usize);
                     dropped += 1;
                 }
