@@ -236,9 +236,55 @@ impl Grid {
     /// neighbours contradict (`outlier_tolerance_m`), then fills single holes if
     /// `fill_single_holes`. Returns the points rejected and filled.
     pub fn clean(&mut self, cfg: &MeshConfig) -> Cleaned {
-        let rejected = self.reject_contradicted(cfg.outlier_tolerance_m, cfg.max_edge_m);
+        // Both verdicts on the grid as it was.
+        let mut rejected = self.contradicted(cfg.outlier_tolerance_m, cfg.max_edge_m);
+        let partial = self.partial_sheet(cfg.partial_sheet_ratio, cfg.max_edge_m);
+        let partial_sheet = partial.len();
+        rejected.extend(partial);
+        rejected.sort_unstable();
+        rejected.dedup();
+        let rejected = self.remove(&rejected);
         let filled = if cfg.fill_single_holes { self.fill_single_holes(cfg.max_edge_m) } else { 0 };
-        Cleaned { rejected, filled }
+        Cleaned { rejected, partial_sheet, filled }
+    }
+
+    /// The points at a surface's edge across frames that the laser sheet only partly reached
+    /// (indices, frame-major), for [`Grid::clean`].
+    ///
+    /// The sheet has a thickness. In the frame where it first reaches a surface (the front of an
+    /// object, the C-arm moving onto it), or last leaves it, only its tail may fall on the
+    /// surface: the line there is weak, and its centre is the centre of the part of the sheet
+    /// that the surface catches, not of the sheet, so the point is placed off the surface by up
+    /// to the sheet's half-thickness seen along the ray (millimetres on the hard phantom at
+    /// 320x240). Its neighbours along the frame make the same error, so they do not contradict
+    /// it, and its one neighbour across frames cannot predict it. Its strength tells: such a
+    /// point holds a fraction of the light of the same sample in the next frame inward, where
+    /// the whole sheet lies on the surface.
+    ///
+    /// A point is taken when exactly one of its neighbours across frames (the same sample in
+    /// the frame before and after) lies within `max_gap_m` of it (the same surface), and that
+    /// neighbour's strength is at least `ratio` times its own. Points without a strength (0)
+    /// are never taken. `ratio <= 1` takes nothing.
+    pub fn partial_sheet(&self, ratio: f32, max_gap_m: f32) -> Vec<usize> {
+        let (ns, nf) = (self.samples, self.frames());
+        if !(ratio > 1.0) || ns == 0 {
+            return Vec::new();
+        }
+        let gap2 = max_gap_m * max_gap_m;
+        let strong = |i: usize| self.intensity[i] > 0.0 && self.points[i][0].is_finite();
+        let mut out = Vec::new();
+        for i in (0..ns * nf).filter(|&i| strong(i)) {
+            let p = self.points[i];
+            let near = |j: usize| strong(j) && dist2(p, self.points[j]) <= gap2;
+            let before = i.checked_sub(ns).filter(|&j| near(j));
+            let after = Some(i + ns).filter(|&j| j < ns * nf && near(j));
+            if let (Some(j), None) | (None, Some(j)) = (before, after) {
+                if self.intensity[j] >= ratio * self.intensity[i] {
+                    out.push(i);
+                }
+            }
+        }
+        out
     }
 
     /// Rejects (sets to NaN) the points that their grid neighbours contradict, and returns how
@@ -259,9 +305,16 @@ impl Grid {
     /// grid as it was, then applied, so the order does not matter. `tolerance_m <= 0` rejects
     /// nothing.
     pub fn reject_contradicted(&mut self, tolerance_m: f32, max_gap_m: f32) -> usize {
+        let rejected = self.contradicted(tolerance_m, max_gap_m);
+        self.remove(&rejected)
+    }
+
+    /// The points [`Grid::reject_contradicted`] rejects (indices, frame-major), the grid left
+    /// as it is.
+    fn contradicted(&self, tolerance_m: f32, max_gap_m: f32) -> Vec<usize> {
         let (ns, nf) = (self.samples, self.frames());
         if !(tolerance_m > 0.0) || ns == 0 {
-            return 0;
+            return Vec::new();
         }
         let pts = &self.points;
         let at = |s: isize, f: isize| -> Option<[f32; 3]> {
@@ -299,21 +352,29 @@ impl Grid {
                 }
             }
         }
-        for &i in &rejected {
+        rejected
+    }
+
+    /// Removes the points `indices` (frame-major, each once) and returns how many.
+    fn remove(&mut self, indices: &[usize]) -> usize {
+        for &i in indices {
             self.points[i] = [f32::NAN; 3];
             self.intensity[i] = 0.0;
             self.range[i] = f32::NAN;
             self.rgb[i] = 0;
         }
-        rejected.len()
+        indices.len()
     }
 }
 
 /// What [`Grid::clean`] did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Cleaned {
-    /// Points rejected because their neighbours contradict them.
+    /// Points rejected: those their neighbours contradict, and those the sheet only partly
+    /// reached.
     pub rejected: usize,
+    /// Of `rejected`, the points the sheet only partly reached ([`Grid::partial_sheet`]).
+    pub partial_sheet: usize,
     /// Single holes filled.
     pub filled: usize,
 }
@@ -348,6 +409,10 @@ pub struct MeshConfig {
     /// Points that their grid neighbours miss by more than this are rejected before meshing,
     /// metres (0: none); see [`Grid::reject_contradicted`].
     pub outlier_tolerance_m: f32,
+    /// A point at a surface's edge across frames is rejected when its one neighbour across
+    /// frames holds at least this many times its laser strength: the sheet only partly
+    /// reached it (1 or less: none); see [`Grid::partial_sheet`].
+    pub partial_sheet_ratio: f32,
     /// Laplacian smoothing iterations (0: none); boundary vertices stay fixed.
     pub smooth_iterations: u32,
     /// Laplacian step (0..1].
@@ -369,6 +434,7 @@ impl MeshConfig {
         min_angle_deg: 12.0,
         fill_single_holes: true,
         outlier_tolerance_m: 0.0035,
+        partial_sheet_ratio: 1.8,
         smooth_iterations: 0,
         smooth_lambda: 0.5,
     };
@@ -386,6 +452,9 @@ impl MeshConfig {
         }
         if !(self.outlier_tolerance_m >= 0.0 && self.outlier_tolerance_m.is_finite()) {
             return Err(format!("outlier_tolerance_m must be >= 0, got {}", self.outlier_tolerance_m));
+        }
+        if !(self.partial_sheet_ratio >= 0.0 && self.partial_sheet_ratio.is_finite()) {
+            return Err(format!("partial_sheet_ratio must be >= 0, got {}", self.partial_sheet_ratio));
         }
         if !(self.smooth_lambda > 0.0 && self.smooth_lambda <= 1.0) {
             return Err(format!("smooth_lambda must be in (0, 1], got {}", self.smooth_lambda));
@@ -968,8 +1037,49 @@ mod tests {
         // The mesher's preparation rejects before it fills: the hole left is filled from the
         // neighbours, not from the wrong point.
         let cleaned = g.clean(&MeshConfig::default());
-        assert_eq!(cleaned, Cleaned { rejected: 1, filled: 1 });
+        assert_eq!(cleaned, Cleaned { rejected: 1, partial_sheet: 0, filled: 1 });
         assert!(g.point(5, 5)[2].abs() < 1e-6, "{:?}", g.point(5, 5));
+    }
+
+    /// A box 20 mm high on the table, frames 20-39 on it. The first and last frame on it are
+    /// weak (the sheet's tail) and 2.5 mm high: taken as partly reached, whatever the rejection of
+    /// contradicted points makes of them; the same edges at full strength, the table's own edges
+    /// and a grid without strengths keep every point.
+    #[test]
+    fn points_the_sheet_only_partly_reached_are_rejected() {
+        let on_box = |f: usize| (20..40).contains(&f);
+        let boxed =
+            |weak: f32| {
+                let mut g = surface(30, 60, 0.001, 0.002, 0.0002, |_, y| {
+                    if on_box((y / 0.002).round() as usize) {
+                        0.02
+                    } else {
+                        0.0
+                    }
+                });
+                let ns = g.samples();
+                for (f, strength) in [(20, weak), (39, weak * 1.2)] {
+                    for s in 0..ns {
+                        g.points_mut()[f * ns + s][2] += 0.0025;
+                        g.intensity[f * ns + s] = strength;
+                    }
+                }
+                g
+            };
+        let mut g = boxed(30.0);
+        assert_eq!(g.clone().reject_contradicted(0.0035, 0.012), 0, "the rule before this one keeps them");
+        let ns = g.samples();
+        let cleaned = g.clean(&MeshConfig { fill_single_holes: false, ..Default::default() });
+        assert_eq!(cleaned, Cleaned { rejected: 2 * ns, partial_sheet: 2 * ns, filled: 0 });
+        assert!((0..ns).all(|s| g.point(s, 20)[0].is_nan() && g.point(s, 39)[0].is_nan()));
+        assert_eq!(g.valid(), 58 * ns);
+        // Strong enough: the sheet lay wholly on the box.
+        assert!(boxed(60.0).partial_sheet(1.8, 0.012).is_empty());
+        // Off, and without strengths.
+        assert!(boxed(30.0).partial_sheet(0.0, 0.012).is_empty());
+        let mut g = boxed(30.0);
+        g.intensity.iter_mut().for_each(|i| *i = 0.0);
+        assert!(g.partial_sheet(1.8, 0.012).is_empty());
     }
 
     proptest::proptest! {

@@ -164,6 +164,7 @@ impl Bounds {
 /// >= 95 % of what the points cover; and the case's bounds.
 fn check(cams: &[Camera], b: Bounds) {
     for c in cams {
+        eprintln!("{c:?}");
         assert_eq!(c.laser_off_points, 0, "{}: points in laser-off frames", c.name);
         assert!(c.table_median_m.abs() <= 0.0001, "{}: table median {:+.3} mm", c.name, c.table_median_m * 1e3);
         assert!(c.coverage >= 0.95, "{}: coverage {:.2} %", c.name, c.coverage * 100.0);
@@ -227,14 +228,14 @@ fn phantom_640x480_rgb8() {
 
 #[test]
 fn phantom_320x240() {
-    // Below the floor: in grey RMS 0.814 / 0.780 mm, 0.24 / 0.14 % beyond 5 mm (0.84 / 0.78 mm
-    // and 0.34 / 0.15 % before weak samples off the strong line's course were dropped; 0.88 /
-    // 0.86 mm and 0.41 / 0.33 % before a bright face beside the line was told from it), the
-    // dark print 80-82 %; in colour 0.11 / 0.21 % beyond 5 mm (the RMS, 0.76-0.78 mm, meets it).
-    let mono = Bounds { rms_m: 0.00086, beyond_5mm: 0.003, dark_band: 0.75 };
+    // Meets the floor in colour, and in grey but for the dark print (80-82 %): RMS 0.749 /
+    // 0.739 mm and 0.057 / 0.065 % beyond 5 mm in grey, 0.702 / 0.706 mm and 0.018 / 0.039 % in
+    // colour. Before the points the sheet only partly reached were rejected (`partial_sheet`):
+    // 0.814 / 0.780 mm and 0.24 / 0.14 % in grey, 0.11 / 0.21 % in colour; 0.88 / 0.86 mm and
+    // 0.41 / 0.33 % in grey before a bright face beside the line was told from it.
+    let mono = Bounds { dark_band: 0.75, ..Bounds::FLOOR_320 };
     check(&scan("phantom", (320, 240), Encoding::Mono8, 0.070, Method::CenterOfGravity), mono);
-    let rgb = Bounds { beyond_5mm: 0.0025, ..Bounds::FLOOR_320 };
-    check(&scan("phantom", (320, 240), Encoding::Rgb8, 0.070, Method::CenterOfGravity), rgb);
+    check(&scan("phantom", (320, 240), Encoding::Rgb8, 0.070, Method::CenterOfGravity), Bounds::FLOOR_320);
 }
 
 #[test]
@@ -268,8 +269,11 @@ fn other_methods_and_the_study_method_on_the_hard_phantom() {
 fn fast_scan_meshes_its_anisotropic_grid() {
     // 140 mm/s at 30 fps: frames 4.7 mm apart, samples about 1 mm apart.
     let cams = scan("phantom", (640, 480), Encoding::Mono8, 0.140, Method::CenterOfGravity);
-    // Below the floor: RMS 0.55-0.61 mm, 0.18-0.21 % beyond 5 mm, dark print in grey 43-58 %.
-    check(&cams, Bounds { rms_m: 0.00072, beyond_5mm: 0.003, dark_band: 0.38 });
+    // The floor asks this scan for its mesh alone (>= 95 % of the points' coverage: 99.9 /
+    // 99.6 %). Held to what it measures: RMS 0.413 / 0.383 mm (0.419 / 0.389 before the points
+    // the sheet only partly reached were rejected), 0.030 / 0 % beyond 5 mm, the dark print
+    // 83 / 100 %.
+    check(&cams, Bounds { rms_m: 0.00045, beyond_5mm: 0.001, dark_band: 0.8 });
 }
 
 /// A debug aid's scan, from the environment: `SCENE` and `W` (defaults given), `RGB` (rgb8,

@@ -65,6 +65,7 @@ fn config(raw: &Params) -> Result<Config, ParamError> {
         min_angle_deg: p.min_angle_deg,
         fill_single_holes: p.fill_single_holes,
         outlier_tolerance_m: p.outlier_tolerance_m,
+        partial_sheet_ratio: p.partial_sheet_ratio,
         smooth_iterations: p.smooth_iterations,
         smooth_lambda: p.smooth_lambda,
     };
@@ -146,7 +147,8 @@ struct ScanAccount {
     received: Vec<i64>,
     without_line: u64,
     refused: u64,
-    /// Points of the finished grid that their neighbours contradict, rejected before meshing.
+    /// Points of the finished grid rejected before meshing: those their neighbours contradict
+    /// and those the laser sheet only partly reached.
     points_rejected: u64,
     /// `(stamp before, stamp after, frames missing between)`.
     gaps: Vec<(i64, i64, u32)>,
@@ -228,7 +230,8 @@ pub struct MesherNode {
     samples: Option<usize>,
     /// Profiles refused for a size the camera does not give.
     bad_profiles: u64,
-    /// Points rejected because their grid neighbours contradict them, over all scans.
+    /// Points rejected before meshing (contradicted, or the sheet only partly reached them),
+    /// over all scans.
     points_rejected: u64,
     /// The scan's frames, for its report.
     account: ScanAccount,

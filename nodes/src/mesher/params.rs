@@ -22,6 +22,11 @@ xsurf_runtime::parameters! {
         /// this is rejected before meshing and counted: a wrong peak, a highlight, an occlusion
         /// edge's mixed pixel (0: keep every point)
         outlier_tolerance_m: f32 = D.outlier_tolerance_m, unit "m";
+        /// a point at a surface's edge across frames (the first or last frame on it) is rejected
+        /// before meshing and counted when its one neighbour across frames has at least this many
+        /// times its laser strength: the sheet only partly reached it, and its centre is the part's,
+        /// off the surface (1 or less: keep them)
+        partial_sheet_ratio: f32 = D.partial_sheet_ratio, range 0.0..=1000.0;
         /// Laplacian smoothing passes (boundary kept)
         smooth_iterations: u32 = D.smooth_iterations;
         /// Laplacian step, (0, 1]
