@@ -233,8 +233,10 @@ impl Grid {
     }
 
     /// Prepares a finished grid for meshing as the mesher does: rejects the points that their
-    /// neighbours contradict (`outlier_tolerance_m`), then fills single holes if
-    /// `fill_single_holes`. Returns the points rejected and filled.
+    /// neighbours contradict (`outlier_tolerance_m`, [`Grid::reject_contradicted`]) and those
+    /// the laser sheet only partly reached (`partial_sheet_ratio`, [`Grid::partial_sheet`]),
+    /// both judged on the grid as it was, then fills single holes if `fill_single_holes`.
+    /// Returns the points rejected and filled.
     pub fn clean(&mut self, cfg: &MeshConfig) -> Cleaned {
         // Both verdicts on the grid as it was.
         let mut rejected = self.contradicted(cfg.outlier_tolerance_m, cfg.max_edge_m);
