@@ -92,7 +92,12 @@ pub struct MesherReport {
     pub last_frame_before_end_s: Option<f64>,
     /// Always `mesher`.
     pub node: String,
-    /// Points the finished grid's neighbours contradicted, rejected before meshing.
+    /// Of `points_rejected`, the points the laser sheet only partly reached (a surface's first
+    /// or last frame, see the mesher's `partial_sheet_ratio`); 0 in reports of older meshers.
+    #[serde(default)]
+    pub points_partial_sheet: u64,
+    /// Points of the finished grid rejected before meshing: those their neighbours contradict
+    /// and those the laser sheet only partly reached.
     pub points_rejected: u64,
     /// Profiles refused (a size the camera does not give, a late one).
     pub profiles_refused: u64,

@@ -150,6 +150,8 @@ struct ScanAccount {
     /// Points of the finished grid rejected before meshing: those their neighbours contradict
     /// and those the laser sheet only partly reached.
     points_rejected: u64,
+    /// Of `points_rejected`, those the laser sheet only partly reached.
+    points_partial_sheet: u64,
     /// `(stamp before, stamp after, frames missing between)`.
     gaps: Vec<(i64, i64, u32)>,
     /// The final cloud's stamp and points, once the scan is closed.
@@ -191,6 +193,7 @@ impl ScanAccount {
             last_frame: t(self.last_ns),
             last_frame_before_end_s: margin(self.last_ns, end_ns),
             node: "mesher".into(),
+            points_partial_sheet: self.points_partial_sheet,
             points_rejected: self.points_rejected,
             profiles_refused: self.refused,
             scan_id,
@@ -233,6 +236,8 @@ pub struct MesherNode {
     /// Points rejected before meshing (contradicted, or the sheet only partly reached them),
     /// over all scans.
     points_rejected: u64,
+    /// Of `points_rejected`, those the sheet only partly reached, over all scans.
+    points_partial_sheet: u64,
     /// The scan's frames, for its report.
     account: ScanAccount,
     /// The growing surface: the first frame whose cells are not yet published, the parts
@@ -327,6 +332,7 @@ impl MesherNode {
             samples: None,
             bad_profiles: 0,
             points_rejected: 0,
+            points_partial_sheet: 0,
             account: ScanAccount::default(),
             growing: Growing::default(),
             meshing: None,
@@ -429,9 +435,12 @@ impl MesherNode {
         self.mesh_done(true, out);
         // One grid per laser, cleaned and meshed apart; the cloud stacks them again.
         let mut blocks = self.grid.blocks(self.cfg.lasers());
-        let rejected: usize = blocks.iter_mut().map(|b| b.clean(&self.cfg.mesh).rejected).sum();
-        self.account.points_rejected = rejected as u64;
-        self.points_rejected += rejected as u64;
+        let (rejected, partial) = blocks.iter_mut().map(|b| b.clean(&self.cfg.mesh)).fold((0, 0), |(r, p), c| {
+            (r + c.rejected as u64, p + c.partial_sheet as u64)
+        });
+        (self.account.points_rejected, self.account.points_partial_sheet) = (rejected, partial);
+        self.points_rejected += rejected;
+        self.points_partial_sheet += partial;
         let stamp = self.grid.stamps_ns().last().copied().unwrap_or(0);
         self.account.final_cloud = Some((stamp, blocks.iter().map(Grid::valid).sum()));
         let report = self.account.report(self.scan_id, &self.camera, aborted, end_ns, self.gaps.nominal_ns());
@@ -770,6 +779,7 @@ impl Component for MesherNode {
             ("frames_outside_scans", self.outside_scan),
             ("bad_profiles", self.bad_profiles),
             ("points_rejected", self.points_rejected),
+            ("points_partial_sheet", self.points_partial_sheet),
         ]
     }
 }
@@ -844,7 +854,9 @@ mod tests {
     }
 
     /// A point that its neighbours contradict is rejected before meshing, counted, and named in
-    /// the scan's report; the cloud published at END does not have it.
+    /// the scan's report; the cloud published at END does not have it. So are the points of a
+    /// first frame much weaker than the next (the sheet only partly on the surface), counted
+    /// apart as well.
     #[test]
     fn contradicted_points_are_rejected_and_reported() {
         #![allow(clippy::unwrap_used)]
@@ -861,7 +873,9 @@ mod tests {
             let points = (0..40)
                 .map(|s| [s as f32 * 0.001, f as f32 * 0.002, if (f, s) == (10, 5) { 0.058 } else { 0.05 }])
                 .collect();
-            let p = Profile { points, intensity: vec![50.0; 40], rgb: None, range: vec![0.5; 40], outside_volume: 0 };
+            // The first frame at a fifth of the others' strength.
+            let strength = if f == 0 { 10.0 } else { 50.0 };
+            let p = Profile { points, intensity: vec![strength; 40], rgb: None, range: vec![0.5; 40], outside_volume: 0 };
             let mut h = xsurf_msgs::std_msgs::Header::default();
             (h.stamp.sec, h.stamp.nanosec) = (2, f * 10_000_000);
             m.handle(Input::Profile, &Msg::Cloud(Arc::new(convert::profile_cloud(&p, h))), &mut out).unwrap();
@@ -878,8 +892,8 @@ mod tests {
                 _ => None,
             })
             .unwrap();
-        assert_eq!(report["points_rejected"], 1, "{report}");
-        assert!(m.counters().contains(&("points_rejected", 1)));
+        assert_eq!((&report["points_rejected"], &report["points_partial_sheet"]), (&41.into(), &40.into()), "{report}");
+        assert!(m.counters().contains(&("points_rejected", 41)) && m.counters().contains(&("points_partial_sheet", 40)));
         let cloud = out
             .items
             .iter()
@@ -889,8 +903,10 @@ mod tests {
                 _ => None,
             })
             .unwrap();
-        // The single hole it leaves is filled from its neighbours (`fill_single_holes`).
-        assert_eq!(cloud.valid(), 40 * 20);
+        // The single hole it leaves is filled from its neighbours (`fill_single_holes`); the
+        // first frame is gone.
+        assert_eq!(cloud.valid(), 40 * 19);
+        assert!((0..40).all(|s| cloud.point(s, 0)[0].is_nan()));
         assert!((cloud.point(5, 10)[2] - 0.05).abs() < 1e-6, "{:?}", cloud.point(5, 10));
     }
 
