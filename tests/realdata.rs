@@ -346,6 +346,20 @@ fn ciclop_calibration_views_agree_with_opencv() {
     assert!(ours.rms_px <= 1.2 * f("rms"), "RMS {:.3} px against OpenCV's {:.3}", ours.rms_px, f("rms"));
 }
 
+/// Robot frame `n`'s line as a profile in image units (a pixel as a millimetre): the column
+/// along the frame, `across_m` across frames, the line's row as the height; its strengths.
+fn robot_profile(n: u32, across_m: f32) -> xsurf_core::triangulate::Profile {
+    let line = detect(&robot_frame(n), robot_camera());
+    let at = |x: usize| [x as f32 * 1e-3, across_m, line.v[x] * 1e-3];
+    xsurf_core::triangulate::Profile {
+        points: (0..line.len()).map(|x| if line.v[x].is_finite() { at(x) } else { [f32::NAN; 3] }).collect(),
+        intensity: line.strength.clone(),
+        rgb: None,
+        range: vec![1.0; line.len()],
+        outside_volume: 0,
+    }
+}
+
 /// The mesher's rejection of contradicted points (`Grid::reject_contradicted`) on real lines,
 /// along the frame: each of the robot's 85 frames as a grid of one frame in image units (a
 /// pixel as a millimetre: the column along the frame, the line's row as the height). The robot
@@ -356,18 +370,12 @@ fn ciclop_calibration_views_agree_with_opencv() {
 #[test]
 fn robot_laser_line_survives_the_rejection_of_contradicted_points() {
     use xsurf_core::mesh::{Grid, MeshConfig};
-    use xsurf_core::triangulate::Profile;
     let labels = robot_labels();
     let cfg = MeshConfig::default();
     let (mut found, mut rejected) = (0, 0);
     for n in 2..=86 {
-        let line = detect(&robot_frame(n), robot_camera());
-        let points = (0..line.len())
-            .map(|x| if line.v[x].is_finite() { [x as f32 * 1e-3, 0.0, line.v[x] * 1e-3] } else { [f32::NAN; 3] })
-            .collect();
-        let p = Profile { points, intensity: vec![1.0; 640], rgb: None, range: vec![1.0; 640], outside_volume: 0 };
         let mut grid = Grid::new(640);
-        grid.push(i64::from(n), &p).unwrap();
+        grid.push(i64::from(n), &robot_profile(n, 0.0)).unwrap();
         found += grid.valid();
         rejected += grid.reject_contradicted(cfg.outlier_tolerance_m, cfg.max_edge_m);
         for f in labels.iter().filter(|f| f[0] as u32 == n) {
@@ -376,7 +384,8 @@ fn robot_laser_line_survives_the_rejection_of_contradicted_points() {
         }
     }
     eprintln!("{rejected} of {found} samples rejected ({:.2} %)", rejected as f64 / found as f64 * 100.0);
-    // Measured: 40 of 47 320 (0.08 %), single samples where the JPEG line jitters by 1-2 rows.
+    // Measured: 57 of 46 393 (0.12 %) on 2026-12-06 (40 of 47 320 when first written, single
+    // samples where the JPEG line jitters by 1-2 rows).
     assert!(rejected as f64 <= 0.005 * found as f64, "{rejected} of {found} rejected");
 }
 
@@ -432,24 +441,11 @@ fn three_laser_detector_on_real_red_lines() {
 #[test]
 fn robot_laser_line_keeps_its_samples_at_edges_across_frames() {
     use xsurf_core::mesh::{Grid, MeshConfig};
-    use xsurf_core::triangulate::Profile;
     let labels = robot_labels();
     let cfg = MeshConfig::default();
     let mut grid = Grid::new(640);
     for n in 2..=86 {
-        let line = detect(&robot_frame(n), robot_camera());
-        let points = (0..line.len())
-            .map(|x| {
-                if line.v[x].is_finite() {
-                    [x as f32 * 1e-3, n as f32 * 1e-3, line.v[x] * 1e-3]
-                } else {
-                    [f32::NAN; 3]
-                }
-            })
-            .collect();
-        let p =
-            Profile { points, intensity: line.strength.clone(), rgb: None, range: vec![1.0; 640], outside_volume: 0 };
-        grid.push(i64::from(n), &p).unwrap();
+        grid.push(i64::from(n), &robot_profile(n, n as f32 * 1e-3)).unwrap();
     }
     let taken = grid.partial_sheet(cfg.partial_sheet_ratio, cfg.max_edge_m);
     let found = grid.valid();

@@ -273,11 +273,12 @@ impl Grid {
             return Vec::new();
         }
         let gap2 = max_gap_m * max_gap_m;
-        let strong = |i: usize| self.intensity[i] > 0.0 && self.points[i][0].is_finite();
+        // A point with a strength: one the rule can judge, or judge by.
+        let judged = |i: usize| self.intensity[i] > 0.0 && self.points[i][0].is_finite();
         let mut out = Vec::new();
-        for i in (0..ns * nf).filter(|&i| strong(i)) {
+        for i in (0..ns * nf).filter(|&i| judged(i)) {
             let p = self.points[i];
-            let near = |j: usize| strong(j) && dist2(p, self.points[j]) <= gap2;
+            let near = |j: usize| judged(j) && dist2(p, self.points[j]) <= gap2;
             let before = i.checked_sub(ns).filter(|&j| near(j));
             let after = Some(i + ns).filter(|&j| j < ns * nf && near(j));
             if let (Some(j), None) | (None, Some(j)) = (before, after) {

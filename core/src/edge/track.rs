@@ -358,11 +358,13 @@ pub(super) fn drop_short_runs(
             let narrower =
                 |w: f32| w < cfg.narrow_width_px && w < NARROW_TOLERANCE * median && w < median - NARROW_DEFICIT_PX;
             let narrow_width = |w: f32| w > 0.0 && narrower(w);
-            // The run's median strength, taken (before any sample is cleared) only where a sample
-            // is narrow or under half the run's maximum strength (the median is at most the
-            // maximum): NaN otherwise, and then never read.
-            let strongest = (r.first..=r.last).map(|s| line.strength[s as usize]).fold(0.0, f32::max);
-            let strength = if (r.first..=r.last).any(|s| {
+            // The run's median strength, taken (before any sample is cleared) only where a found
+            // sample is narrow or under half the run's maximum strength (the median is at most
+            // the maximum): NaN otherwise, and then never read. The samples a run steps over
+            // (strength 0) ask for nothing.
+            let found = || (r.first..=r.last).filter(|&s| line.across(s as usize).is_finite());
+            let strongest = found().map(|s| line.strength[s as usize]).fold(0.0, f32::max);
+            let strength = if found().any(|s| {
                 line.strength[s as usize] < SLIVER_STRENGTH * strongest || narrow_width(line.width[s as usize])
             }) {
                 median_strength(line, &r, scratch)
