@@ -307,6 +307,7 @@ float32[] strength              # peak height above the local background (grey l
 float32[] width                 # line width (pixels, full width at half maximum), 0 where none
 uint8[] rgb                     # surface colour beside the line, 3 bytes a sample; empty for mono images
 string[] lasers                 # with several lasers: their names, one block of samples each (laser k: samples k*n..(k+1)*n); empty: one laser
+uint8 layers                    # lines per laser: 2 keeps a second surface's line where a row crosses two (blocks layer-major: every laser's first line, then every laser's second, NaN where none); 0 or 1: one
 "#,
         &["std_msgs/msg/Header"],
     ),

@@ -579,6 +579,12 @@ pub mod xsurf_msgs {
         /// `k * n .. (k + 1) * n` are laser `lasers[k]`'s, `n` one per row or column); empty:
         /// one laser, the single `laser_plane` (and every message written before this field).
         pub lasers: Vec<String>,
+        /// Lines per laser: 2 where the detector keeps a second surface's line (a row where
+        /// the line crosses two surfaces, as where an object hides part of the table): the
+        /// blocks of samples are layer-major, every laser's first line in the order of
+        /// `lasers`, then every laser's second line (NaN where a row has one surface). 0 or
+        /// 1: one line per laser (0: every message written before this field).
+        pub layers: u8,
     }
 
     /// The fields of a `LaserLine` before `lasers` (what older bags and peers send).
@@ -596,17 +602,20 @@ pub mod xsurf_msgs {
         rgb: Vec<u8>,
     }
 
-    /// Every field, `lasers` defaulted: a `LaserLine` from a self-describing format (JSON).
+    /// Every field, `lasers` and `layers` defaulted: a `LaserLine` from a self-describing
+    /// format (JSON).
     #[derive(Deserialize)]
     struct LaserLineAll {
         #[serde(flatten)]
         f: LaserLineFields,
         #[serde(default)]
         lasers: Vec<String>,
+        #[serde(default)]
+        layers: u8,
     }
 
     impl LaserLineFields {
-        fn with(self, lasers: Vec<String>) -> LaserLine {
+        fn with(self, lasers: Vec<String>, layers: u8) -> LaserLine {
             let f = self;
             LaserLine {
                 header: f.header,
@@ -619,13 +628,14 @@ pub mod xsurf_msgs {
                 width: f.width,
                 rgb: f.rgb,
                 lasers,
+                layers,
             }
         }
     }
 
-    /// A `LaserLine` whose payload ends before `lasers` (a message written before the field
-    /// existed) reads as one laser; CDR lays a nested struct out inline, so the older fields
-    /// are read as one.
+    /// A `LaserLine` whose payload ends before `lasers` or `layers` (a message written before
+    /// the field existed) reads as one laser, one line; CDR lays a nested struct out inline,
+    /// so the older fields are read as one.
     impl<'de> Deserialize<'de> for LaserLine {
         fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
             struct V;
@@ -637,19 +647,25 @@ pub mod xsurf_msgs {
                 fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<LaserLine, A::Error> {
                     let f: LaserLineFields =
                         seq.next_element()?.ok_or_else(|| serde::de::Error::invalid_length(0, &self))?;
-                    // The payload's end before `lasers`: an older message, one laser.
+                    // The payload's end before `lasers` or `layers`: an older message, one
+                    // laser, one line.
                     let lasers = seq.next_element::<Vec<String>>().ok().flatten().unwrap_or_default();
-                    Ok(f.with(lasers))
+                    let layers = seq.next_element::<u8>().ok().flatten().unwrap_or_default();
+                    Ok(f.with(lasers, layers))
                 }
                 fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<LaserLine, A::Error> {
                     let a = LaserLineAll::deserialize(serde::de::value::MapAccessDeserializer::new(map))?;
-                    Ok(a.f.with(a.lasers))
+                    Ok(a.f.with(a.lasers, a.layers))
                 }
             }
-            d.deserialize_struct("LaserLine", &["fields", "lasers"], V)
+            d.deserialize_struct("LaserLine", &["fields", "lasers", "layers"], V)
         }
     }
     impl LaserLine {
+        /// Lines per laser (`layers`, at least 1).
+        pub fn layer_count(&self) -> usize {
+            usize::from(self.layers.max(1))
+        }
         /// One sample per image row.
         pub const ORIENTATION_VERTICAL: u8 = 0;
         /// One sample per image column.

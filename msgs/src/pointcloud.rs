@@ -63,9 +63,9 @@ pub fn build(
     width: u32,
     mut point: impl FnMut(usize, usize) -> ([f32; 3], f32, u32),
 ) -> PointCloud2 {
-    build_fields(header, height, width, false, |r, c| {
+    build_fields(header, height, width, (false, false), |r, c| {
         let (p, i, rgb) = point(r, c);
-        (p, i, rgb, 0.0)
+        (p, i, rgb, 0.0, 0.0)
     })
 }
 
@@ -75,25 +75,47 @@ pub fn build_with_laser(
     header: Header,
     height: u32,
     width: u32,
-    point: impl FnMut(usize, usize) -> ([f32; 3], f32, u32, f32),
+    mut point: impl FnMut(usize, usize) -> ([f32; 3], f32, u32, f32),
 ) -> PointCloud2 {
-    build_fields(header, height, width, true, point)
+    build_fields(header, height, width, (true, false), |r, c| {
+        let (p, i, rgb, l) = point(r, c);
+        (p, i, rgb, l, 0.0)
+    })
+}
+
+/// `x y z intensity rgb`, then the field `laser` where `laser` is set and the field `layer`
+/// (FLOAT32, 0 for a laser's first line, 1 for its second surface's) where `layer` is set:
+/// the clouds whose rows hold two lines per laser.
+pub fn build_tagged(
+    header: Header,
+    height: u32,
+    width: u32,
+    (laser, layer): (bool, bool),
+    point: impl FnMut(usize, usize) -> ([f32; 3], f32, u32, f32, f32),
+) -> PointCloud2 {
+    build_fields(header, height, width, (laser, layer), point)
+}
+
+/// True when `cloud` has the field `layer`: its rows hold each laser's first line, then each
+/// laser's second (see [`build_tagged`]).
+pub fn has_layers(cloud: &PointCloud2) -> bool {
+    cloud.fields.iter().any(|f| f.name == "layer")
 }
 
 fn build_fields(
     header: Header,
     height: u32,
     width: u32,
-    laser: bool,
-    mut point: impl FnMut(usize, usize) -> ([f32; 3], f32, u32, f32),
+    (laser, layer): (bool, bool),
+    mut point: impl FnMut(usize, usize) -> ([f32; 3], f32, u32, f32, f32),
 ) -> PointCloud2 {
-    let step = if laser { POINT_STEP + 4 } else { POINT_STEP };
+    let step = POINT_STEP + 4 * (u32::from(laser) + u32::from(layer));
     let n = height as usize * width as usize;
     let mut data = Vec::with_capacity(n * step as usize);
     let mut dense = true;
     for r in 0..height as usize {
         for c in 0..width as usize {
-            let (p, i, rgb, l) = point(r, c);
+            let (p, i, rgb, l, k) = point(r, c);
             dense &= p.iter().all(|v| v.is_finite());
             for v in p {
                 data.extend_from_slice(&v.to_le_bytes());
@@ -103,12 +125,18 @@ fn build_fields(
             if laser {
                 data.extend_from_slice(&l.to_le_bytes());
             }
+            if layer {
+                data.extend_from_slice(&k.to_le_bytes());
+            }
         }
     }
     let field = |name: &str, offset| PointField { name: name.into(), offset, datatype: PointField::FLOAT32, count: 1 };
     let mut fields = vec![field("x", 0), field("y", 4), field("z", 8), field("intensity", 12), field("rgb", 16)];
     if laser {
         fields.push(field("laser", 20));
+    }
+    if layer {
+        fields.push(field("layer", if laser { 24 } else { 20 }));
     }
     PointCloud2 {
         header,
@@ -200,6 +228,16 @@ mod tests {
         assert_eq!((c.point_step, c.fields.len()), (24, 6));
         let p = read(&c).unwrap();
         assert_eq!((p[1].xyz, p[1].rgb, p[1].laser), ([1.0; 3], Some(7), Some(1.0)));
+        assert!(!has_layers(&c));
+        // Two lines per laser: the field `layer` after `laser`.
+        let c = build_tagged(Header::default(), 4, 1, (true, true), |r, _| ([r as f32; 3], 1.0, 7, 0.0, (r / 2) as f32));
+        assert_eq!((c.point_step, c.fields.len(), c.fields[6].offset), (28, 7, 24));
+        assert!(has_layers(&c));
+        assert_eq!(f32::from_le_bytes(c.data[3 * 28 + 24..3 * 28 + 28].try_into().unwrap()), 1.0);
+        assert_eq!(read(&c).unwrap()[3].laser, Some(0.0));
+        let c = build_tagged(Header::default(), 2, 1, (false, true), |r, _| ([r as f32; 3], 1.0, 7, 0.0, r as f32));
+        assert_eq!((c.point_step, c.fields[5].name.as_str(), c.fields[5].offset), (24, "layer", 20));
+        assert_eq!(read(&c).unwrap()[1].laser, None);
     }
 
     #[test]

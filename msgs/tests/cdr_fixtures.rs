@@ -79,7 +79,8 @@ fn definitions_carry_the_dependency_closure() {
 }
 
 /// A LaserLine written before `lasers` existed (its payload ends after `rgb`) reads as one
-/// laser; one with lasers keeps them.
+/// laser, and one written before `layers` (ending after `lasers`) as one line per laser; one
+/// with lasers and layers keeps them.
 #[test]
 fn laser_lines_without_the_lasers_field_read_as_one_laser() {
     let line = ours::LaserLine {
@@ -94,14 +95,21 @@ fn laser_lines_without_the_lasers_field_read_as_one_laser() {
         ..Default::default()
     };
     let bytes = cdr::encode(&line).unwrap();
+    // The layout before `layers`: the same bytes without the last one.
+    assert_eq!(bytes[bytes.len() - 1], 0);
+    let before_layers = &bytes[..bytes.len() - 1];
+    let back: ours::LaserLine = cdr::decode(before_layers).unwrap();
+    assert_eq!(format!("{back:?}"), format!("{line:?}"));
+    assert_eq!(back.layer_count(), 1);
     // The older layout: the same bytes up to the end of rgb (the empty list and its padding cut).
-    let old = &bytes[..bytes.len() - 4 - 1];
-    assert_eq!(u32::from_le_bytes(bytes[bytes.len() - 4..].try_into().unwrap()), 0);
+    let old = &before_layers[..before_layers.len() - 4 - 1];
+    assert_eq!(u32::from_le_bytes(before_layers[before_layers.len() - 4..].try_into().unwrap()), 0);
     let back: ours::LaserLine = cdr::decode(old).unwrap();
     assert_eq!(format!("{back:?}"), format!("{line:?}"));
-    let three = ours::LaserLine { lasers: vec!["collimator".into(), "left".into(), "right".into()], ..line.clone() };
+    let three =
+        ours::LaserLine { lasers: vec!["collimator".into(), "left".into(), "right".into()], layers: 2, ..line.clone() };
     let back: ours::LaserLine = cdr::decode(&cdr::encode(&three).unwrap()).unwrap();
-    assert_eq!(back.lasers, three.lasers);
+    assert_eq!((back.lasers.clone(), back.layers, back.layer_count()), (three.lasers.clone(), 2, 2));
     // A payload cut inside the older fields is still an error.
     assert!(cdr::decode::<ours::LaserLine>(&old[..old.len() - 6]).is_err());
 }
