@@ -18,6 +18,9 @@ pub struct CloudPoint {
     pub rgb: Option<u32>,
     /// The laser that lit it (an index into the `lasers` parameter), if the cloud has it.
     pub laser: Option<f32>,
+    /// The line of its laser that placed it (0 the first, 1 a second surface's), if the cloud
+    /// has the field `layer`.
+    pub layer: Option<f32>,
 }
 
 /// Why a cloud cannot be read.
@@ -188,6 +191,7 @@ pub fn read(cloud: &PointCloud2) -> Result<Vec<CloudPoint>, CloudError> {
     };
     let (ox, oy, oz) = (offset("x", true)?, offset("y", true)?, offset("z", true)?);
     let (oi, oc, ol) = (offset("intensity", false)?, offset("rgb", false)?, offset("laser", false)?);
+    let ok = offset("layer", false)?;
     let f = |b: &[u8], o: usize| f32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]]);
     let mut out = Vec::with_capacity(w * h);
     for r in 0..h {
@@ -198,6 +202,7 @@ pub fn read(cloud: &PointCloud2) -> Result<Vec<CloudPoint>, CloudError> {
                 intensity: oi.map(|o| f(b, o)),
                 rgb: oc.map(|o| f(b, o).to_bits()),
                 laser: ol.map(|o| f(b, o)),
+                layer: ok.map(|o| f(b, o)),
             });
         }
     }
@@ -230,14 +235,15 @@ mod tests {
         assert_eq!((p[1].xyz, p[1].rgb, p[1].laser), ([1.0; 3], Some(7), Some(1.0)));
         assert!(!has_layers(&c));
         // Two lines per laser: the field `layer` after `laser`.
-        let c = build_tagged(Header::default(), 4, 1, (true, true), |r, _| ([r as f32; 3], 1.0, 7, 0.0, (r / 2) as f32));
+        let c =
+            build_tagged(Header::default(), 4, 1, (true, true), |r, _| ([r as f32; 3], 1.0, 7, 0.0, (r / 2) as f32));
         assert_eq!((c.point_step, c.fields.len(), c.fields[6].offset), (28, 7, 24));
         assert!(has_layers(&c));
         assert_eq!(f32::from_le_bytes(c.data[3 * 28 + 24..3 * 28 + 28].try_into().unwrap()), 1.0);
-        assert_eq!(read(&c).unwrap()[3].laser, Some(0.0));
+        assert_eq!((read(&c).unwrap()[3].laser, read(&c).unwrap()[3].layer), (Some(0.0), Some(1.0)));
         let c = build_tagged(Header::default(), 2, 1, (false, true), |r, _| ([r as f32; 3], 1.0, 7, 0.0, r as f32));
         assert_eq!((c.point_step, c.fields[5].name.as_str(), c.fields[5].offset), (24, "layer", 20));
-        assert_eq!(read(&c).unwrap()[1].laser, None);
+        assert_eq!((read(&c).unwrap()[1].laser, read(&c).unwrap()[1].layer), (None, Some(1.0)));
     }
 
     #[test]

@@ -118,8 +118,10 @@ pub fn transform_stamped(stamp_ns: i64, parent: &str, child: &str, t: &Iso3) -> 
 }
 
 /// The message form of several lasers' lines in one image: one block of samples per laser, in
-/// the order of `lasers` (empty: one line, the single laser).
-pub fn lines_msg(lines: &[CoreLine], lasers: &[String], header: Header) -> LaserLine {
+/// the order of `lasers` (empty: one line, the single laser); with `layers` 2, each laser's
+/// second surfaces' line after every laser's first (`lines` layer-major, as
+/// `LaserDetectors::detect` writes them).
+pub fn lines_msg(lines: &[CoreLine], lasers: &[String], layers: usize, header: Header) -> LaserLine {
     let first = lines.first();
     let cat = |f: fn(&CoreLine) -> &Vec<f32>| lines.iter().flat_map(|l| f(l).iter().copied()).collect::<Vec<f32>>();
     LaserLine {
@@ -136,8 +138,13 @@ pub fn lines_msg(lines: &[CoreLine], lasers: &[String], header: Header) -> Laser
         width: cat(|l| &l.width),
         rgb: lines.iter().flat_map(|l| l.rgb.iter().copied()).collect(),
         lasers: lasers.to_vec(),
+        layers: if layers > 1 { u8::try_from(layers).unwrap_or(u8::MAX) } else { 0 },
     }
 }
+
+/// The most lines per laser a `LaserLine` carries (field `layers`): the first, and a second
+/// surface's.
+pub const MAX_LAYERS: u8 = 2;
 
 /// Why a `LaserLine` message cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -166,6 +173,9 @@ pub enum LineShapeError {
         /// The node's.
         expected: Vec<String>,
     },
+    /// More lines per laser than a detector writes.
+    #[error("LaserLine has layers {0}: 0 or 1 (one line per laser) or 2 (and a second surface's)")]
+    Layers(u8),
     /// The orientation is neither vertical (0) nor horizontal (1).
     #[error("LaserLine orientation {0} is neither 0 (vertical) nor 1 (horizontal)")]
     Orientation(u8),
@@ -173,8 +183,8 @@ pub enum LineShapeError {
     #[error("LaserLine image size {0}x{1} is outside {2} pixels a side")]
     ImageSize(u32, u32, String),
     /// The sample count is not one per row (vertical) or column (horizontal) of its image, for
-    /// each laser.
-    #[error("LaserLine has {samples} samples; a {orientation} line of a {width}x{height} image has {expected}")]
+    /// each laser and layer.
+    #[error("LaserLine has {samples} samples; a {orientation} line of a {width}x{height} image has {expected} (times its lasers and layers)")]
     Samples {
         /// Samples in the message.
         samples: usize,
@@ -190,9 +200,10 @@ pub enum LineShapeError {
 }
 
 /// The algorithm form of a line message, one line per block of samples (`lasers`, or one block
-/// without), checking that each describes a line of its image: arrays of one length, a known
-/// orientation, an image within the limits, and one sample per row (vertical) or column
-/// (horizontal) and laser.
+/// without; with `layers` 2 every laser's first line, then every laser's second), checking that
+/// each describes a line of its image: arrays of one length, a known orientation, an image
+/// within the limits, at most 2 layers, and one sample per row (vertical) or column
+/// (horizontal), laser and layer.
 pub fn core_lines(m: &LaserLine) -> Result<Vec<CoreLine>, LineShapeError> {
     let n = m.u.len();
     if m.v.len() != n || m.strength.len() != n || m.width.len() != n || !(m.rgb.is_empty() || m.rgb.len() == 3 * n) {
@@ -212,7 +223,10 @@ pub fn core_lines(m: &LaserLine) -> Result<Vec<CoreLine>, LineShapeError> {
     if !xsurf_core::limits::image_side_ok(m.image_width) || !xsurf_core::limits::image_side_ok(m.image_height) {
         return Err(LineShapeError::ImageSize(m.image_width, m.image_height, xsurf_core::limits::image_side_text()));
     }
-    let blocks = m.lasers.len().max(1);
+    if m.layers > MAX_LAYERS {
+        return Err(LineShapeError::Layers(m.layers));
+    }
+    let blocks = m.lasers.len().max(1) * m.layer_count();
     if m.lasers.len() > xsurf_core::rig::MAX_LASERS || n != expected as usize * blocks {
         return Err(LineShapeError::Samples {
             samples: n,
@@ -245,12 +259,50 @@ pub fn profile_cloud(p: &Profile, header: Header) -> PointCloud2 {
     })
 }
 
-/// A one-frame profile of several lasers (a block of `per_laser` samples each, `Some`) with
-/// the field `laser` (the block's index); `None`: [`profile_cloud`], without the field.
-pub fn profile_cloud_lasers(p: &Profile, header: Header, per_laser: Option<usize>) -> PointCloud2 {
-    let Some(n) = per_laser.filter(|&n| n > 0) else { return profile_cloud(p, header) };
-    pointcloud::build_with_laser(header, p.points.len() as u32, 1, |r, _| {
-        (p.points[r], p.intensity[r], p.rgb.as_ref().map_or(0, |c| c[r]), (r / n) as f32)
+/// How the samples of a profile (or a grid's frame) are laid out in blocks: `lasers` lasers
+/// (0: `lasers` unset, one laser and no field `laser`) and `layers` lines per laser (2: every
+/// laser's first line, then every laser's second, and the field `layer`; 1: no field).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Blocks {
+    /// The lasers named (0: one laser, unnamed).
+    pub lasers: usize,
+    /// Lines per laser (1 or 2).
+    pub layers: usize,
+}
+
+impl Blocks {
+    /// One laser, one line: the single block, without the fields `laser` and `layer`.
+    pub const ONE: Blocks = Blocks { lasers: 0, layers: 1 };
+
+    /// The number of blocks of samples.
+    pub fn count(&self) -> usize {
+        self.lasers.max(1) * self.layers.max(1)
+    }
+
+    /// Sample `r` of a profile of `samples` samples: its laser's index and its layer.
+    fn of(&self, r: usize, samples: usize) -> (f32, f32) {
+        let block = r / (samples / self.count()).max(1);
+        let lasers = self.lasers.max(1);
+        ((block % lasers) as f32, (block / lasers) as f32)
+    }
+
+    /// The fields `laser` and `layer`, as the blocks call for them.
+    fn fields(&self) -> (bool, bool) {
+        (self.lasers > 0, self.layers > 1)
+    }
+}
+
+/// A one-frame profile in `blocks` as an organized cloud (height = samples, width 1), with the
+/// field `laser` (the sample's block's laser) with named lasers and `layer` (0 or 1) with
+/// second lines; [`profile_cloud`] without either.
+pub fn profile_cloud_blocks(p: &Profile, header: Header, blocks: Blocks) -> PointCloud2 {
+    if blocks.fields() == (false, false) {
+        return profile_cloud(p, header);
+    }
+    let n = p.points.len();
+    pointcloud::build_tagged(header, n as u32, 1, blocks.fields(), |r, _| {
+        let (laser, layer) = blocks.of(r, n);
+        (p.points[r], p.intensity[r], p.rgb.as_ref().map_or(0, |c| c[r]), laser, layer)
     })
 }
 
@@ -316,17 +368,17 @@ pub fn grid_cloud(g: &Grid, header: Header) -> PointCloud2 {
     })
 }
 
-/// The organized grid of a scanner with `lasers` lasers (a block of samples each) with the
-/// field `laser`; 0 (`lasers` unset): [`grid_cloud`], without the field.
-pub fn grid_cloud_lasers(g: &Grid, header: Header, lasers: usize) -> PointCloud2 {
-    if lasers == 0 {
+/// The organized grid of a scanner whose profiles hold `blocks` (a block of samples per laser
+/// and line), with the fields `laser` and `layer` as [`profile_cloud_blocks`] has them.
+pub fn grid_cloud_blocks(g: &Grid, header: Header, blocks: Blocks) -> PointCloud2 {
+    if blocks.fields() == (false, false) {
         return grid_cloud(g, header);
     }
     let ns = g.samples();
-    let per = (ns / lasers).max(1);
-    pointcloud::build_with_laser(header, ns as u32, g.frames() as u32, |r, c| {
+    pointcloud::build_tagged(header, ns as u32, g.frames() as u32, blocks.fields(), |r, c| {
         let i = c * ns + r;
-        (g.points()[i], g.intensity()[i], g.rgb()[i], (r / per) as f32)
+        let (laser, layer) = blocks.of(r, ns);
+        (g.points()[i], g.intensity()[i], g.rgb()[i], laser, layer)
     })
 }
 
@@ -419,5 +471,35 @@ mod tests {
     fn inconsistent_line_is_refused() {
         let m = LaserLine { u: vec![1.0], v: vec![], ..Default::default() };
         assert!(core_lines(&m).is_err());
+    }
+
+    /// A line with second surfaces' lines: blocks per laser and line, layer-major, and the
+    /// message says so; more than two lines per laser, or samples for fewer, are refused.
+    #[test]
+    fn second_lines_make_blocks_of_their_own() {
+        let line = |u: f32| CoreLine {
+            orientation: Orientation::Vertical,
+            image_width: 64,
+            image_height: 32,
+            u: vec![u; 32],
+            v: (0..32).map(|v| v as f32).collect(),
+            strength: vec![9.0; 32],
+            width: vec![2.0; 32],
+            rgb: Vec::new(),
+        };
+        let lasers = ["collimator".to_string(), "left".to_string()];
+        let lines = [line(1.0), line(2.0), line(3.0), line(4.0)];
+        let m = lines_msg(&lines, &lasers, 2, Header::default());
+        assert_eq!((m.layers, m.u.len()), (2, 128));
+        let back = core_lines(&m).unwrap();
+        assert_eq!(back.iter().map(|l| l.u[0]).collect::<Vec<_>>(), vec![1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(lines_msg(&lines[..2], &lasers, 1, Header::default()).layers, 0);
+        assert_eq!(core_lines(&LaserLine { layers: 3, ..m.clone() }), Err(LineShapeError::Layers(3)));
+        let short = lines_msg(&lines[..2], &lasers, 2, Header::default());
+        assert!(matches!(core_lines(&short), Err(LineShapeError::Samples { samples: 64, expected: 128, .. })));
+        // The blocks' laser and line, as the profile's fields have them.
+        let b = Blocks { lasers: 2, layers: 2 };
+        assert_eq!((b.count(), b.of(3, 12), b.of(7, 12), b.of(11, 12)), (4, (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)));
+        assert_eq!((Blocks::ONE.count(), Blocks { lasers: 0, layers: 2 }.of(5, 6)), (1, (0.0, 1.0)));
     }
 }

@@ -83,6 +83,9 @@ class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
     transforms: sequence[TransformStamped] = field(default_factory=list)
 
 
+# LaserLine as a peer built before its last field, `uint8 layers`, has it (deliberately): the
+# graph tests then show that such a peer reads our lines and that our nodes read its lines as one
+# line per laser.
 @dataclass
 class LaserLine(IdlStruct, typename="xsurf_msgs::msg::dds_::LaserLine_"):
     header: Header = field(default_factory=Header)

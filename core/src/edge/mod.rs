@@ -1277,6 +1277,10 @@ pub struct LaserDetectors {
     detectors: Vec<EdgeDetector>,
     /// Every laser's signal, one plane after the other (`w * h` bytes each), row-major.
     colour: Vec<u8>,
+    /// Each laser's second surfaces' line too ([`EdgeDetector::detect_surfaces`]).
+    second_surfaces: bool,
+    /// The second lines, while they are written (moved out of `outs` and back).
+    seconds: Vec<LaserLine>,
 }
 
 impl LaserDetectors {
@@ -1297,14 +1301,49 @@ impl LaserDetectors {
         Ok(Self { detectors, ..Default::default() })
     }
 
+    /// The same detectors, keeping each laser's second surfaces' line as well (`true`,
+    /// [`EdgeDetector::detect_surfaces`]) or not.
+    pub fn with_second_surfaces(self, second_surfaces: bool) -> Self {
+        Self { second_surfaces, ..self }
+    }
+
+    /// Lines per laser that [`LaserDetectors::detect`] writes: 2 with the second surfaces, else 1.
+    pub fn layers(&self) -> usize {
+        1 + usize::from(self.second_surfaces)
+    }
+
     /// Finds each laser's line in `image`, laser `k`'s into `outs[k]` (`outs` is resized to
-    /// the lasers). One laser is found as [`EdgeDetector::detect`] finds it, in any encoding;
-    /// several need a colour image.
+    /// the lasers, times [`LaserDetectors::layers`]). With the second surfaces, laser `k`'s
+    /// second line goes into `outs[n + k]` (`n` lasers): layer-major, as a `LaserLine` message
+    /// carries them. One laser is found as [`EdgeDetector::detect`] (or `detect_surfaces`)
+    /// finds it, in any encoding; several need a colour image.
     pub fn detect(&mut self, image: &ImageView<'_>, outs: &mut Vec<LaserLine>) -> Result<Vec<DetectStats>, EdgeError> {
         let n = self.detectors.len();
-        outs.resize_with(n, LaserLine::default);
+        outs.resize_with(n * self.layers(), LaserLine::default);
+        let mut seconds = std::mem::take(&mut self.seconds);
+        seconds.clear();
+        seconds.extend(outs.drain(n..));
+        let r = self.detect_layers(image, &mut outs[..], &mut seconds);
+        outs.append(&mut seconds);
+        self.seconds = seconds;
+        r
+    }
+
+    /// [`LaserDetectors::detect`] into the first lines `outs` and, where `seconds` holds one
+    /// per laser, the second lines.
+    fn detect_layers(
+        &mut self,
+        image: &ImageView<'_>,
+        outs: &mut [LaserLine],
+        seconds: &mut [LaserLine],
+    ) -> Result<Vec<DetectStats>, EdgeError> {
+        let n = self.detectors.len();
         if n == 1 {
-            return Ok(vec![self.detectors[0].detect(image, &mut outs[0])?]);
+            let d = &mut self.detectors[0];
+            return Ok(vec![match seconds.first_mut() {
+                Some(second) => d.detect_surfaces(image, &mut outs[0], second)?,
+                None => d.detect(image, &mut outs[0])?,
+            }]);
         }
         let enc = image.encoding();
         if !enc.is_color() {
@@ -1331,7 +1370,7 @@ impl LaserDetectors {
             } else {
                 Signal::Rows(plane::Rows { data: bytes, start: 0, stride: w, rows: h, cols: w })
             };
-            stats.push(d.detect_in(image, (xs.clone(), ys.clone()), signal, out, None));
+            stats.push(d.detect_in(image, (xs.clone(), ys.clone()), signal, out, seconds.get_mut(k)));
         }
         Ok(stats)
     }
@@ -2347,6 +2386,81 @@ mod tests {
         let (mut first, mut second) = (LaserLine::default(), LaserLine::default());
         let stats = d.detect_surfaces(&dark.view().unwrap(), &mut first, &mut second).unwrap();
         assert_eq!((first.found(), second.found(), stats.second), (0, 0, 0));
+    }
+
+    #[test]
+    fn several_lasers_keep_each_ones_second_surfaces() {
+        // A red laser crossing two surfaces (rows 25-34 hold both lines) and a green one on one
+        // surface, in one rgb8 image with room light and noise in each channel.
+        let object = |y: u32| 70.0 + 0.1 * f64::from(y);
+        let table = |y: u32| 30.0 + 0.05 * f64::from(y);
+        let green = |y: u32| 110.0 - 0.08 * f64::from(y);
+        let top = box_line(-0.5, 0.5, 0.0, 2.5);
+        let (w, h) = (140u32, 60u32);
+        let mut img = Image::new(w, h, Encoding::Rgb8);
+        let mut rng = crate::synth::SplitMix::new(47);
+        for y in 0..h {
+            for x in 0..w {
+                let (a, b) = (f64::from(x) - 0.5, f64::from(x) + 0.5);
+                let mut red = 0.0;
+                if y <= 34 {
+                    red += 120.0 * box_line(a, b, object(y), 2.5) / top;
+                }
+                if y >= 25 {
+                    red += 80.0 * box_line(a, b, table(y), 2.5) / top;
+                }
+                let g = 100.0 * box_line(a, b, green(y), 2.5) / top;
+                let px = 3 * (y * w + x) as usize;
+                for (k, v) in
+                    [30.0 + red + 0.1 * g, 30.0 + g + 0.1 * red, 30.0 + 0.1 * (red + g)].into_iter().enumerate()
+                {
+                    img.data[px + k] = (v + 2.0 * rng.normal()).round().clamp(0.0, 255.0) as u8;
+                }
+            }
+        }
+        let configs = || {
+            [Channel::RedMinusOthers, Channel::GreenMinusOthers]
+                .map(|channel| EdgeConfig { channel, ..Default::default() })
+                .to_vec()
+        };
+        let view = img.view().unwrap();
+        let (mut one, mut two) = (Vec::new(), Vec::new());
+        let mut plain = LaserDetectors::new(configs()).unwrap();
+        assert_eq!(plain.layers(), 1);
+        plain.detect(&view, &mut one).unwrap();
+        let mut both = LaserDetectors::new(configs()).unwrap().with_second_surfaces(true);
+        assert_eq!(both.layers(), 2);
+        // Twice, so that buffers kept from the first frame are used again.
+        for _ in 0..2 {
+            let stats = both.detect(&view, &mut two).unwrap();
+            // Layer-major: both first lines as without the second surfaces, then each laser's
+            // second.
+            assert_eq!(two.len(), 4);
+            assert_eq!(format!("{:?}", &two[..2]), format!("{one:?}"));
+            assert_eq!((stats[0].second as usize, stats[1].second), (two[2].found(), 0));
+            assert_eq!(two[3].found(), 0, "the green laser crosses one surface");
+            let crossing = (25..=34u32)
+                .filter(|&y| {
+                    let (a, b) = (f64::from(two[0].u[y as usize]), f64::from(two[2].u[y as usize]));
+                    let (near, far) = if (a - object(y)).abs() < 1.0 { (a, b) } else { (b, a) };
+                    (near - object(y)).abs() < 0.25 && (far - table(y)).abs() < 0.25
+                })
+                .count();
+            assert!(crossing >= 9, "both red lines in {crossing} of the 10 rows that cross two surfaces");
+            let elsewhere = (0..h).filter(|&y| !(25..=34).contains(&y) && two[2].u[y as usize].is_finite()).count();
+            assert_eq!(elsewhere, 0);
+        }
+        // Back to one line per laser: two lines again.
+        let mut again = both.with_second_surfaces(false);
+        again.detect(&view, &mut two).unwrap();
+        assert_eq!(format!("{two:?}"), format!("{one:?}"));
+        // One laser keeps its second surfaces as `detect_surfaces` does, in any encoding.
+        let grey = EdgeConfig::default();
+        let mut single = LaserDetectors::new(vec![grey.clone()]).unwrap().with_second_surfaces(true);
+        single.detect(&view, &mut two).unwrap();
+        let (mut first, mut second) = (LaserLine::default(), LaserLine::default());
+        EdgeDetector::new(grey).unwrap().detect_surfaces(&view, &mut first, &mut second).unwrap();
+        assert_eq!(format!("{two:?}"), format!("{:?}", [first, second]));
     }
 
     #[test]

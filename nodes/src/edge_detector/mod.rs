@@ -96,7 +96,9 @@ impl EdgeDetectorNode {
                 l.iter().map(|l| xsurf_core::edge::EdgeConfig { channel: Channel::against_others(l.channel), ..config.clone() }).collect()
             }
         };
-        let detector = LaserDetectors::new(configs).map_err(|e| Params::invalid("edge_detector", e.to_string()))?;
+        let detector = LaserDetectors::new(configs)
+            .map_err(|e| Params::invalid("edge_detector", e.to_string()))?
+            .with_second_surfaces(typed.second_surfaces);
         let names = lasers.map(|l| l.into_iter().map(|l| l.name).collect()).unwrap_or_default();
         Ok((typed, detector, names))
     }
@@ -142,11 +144,11 @@ impl EdgeDetectorNode {
             }
             e => NodeError::malformed(e),
         })?;
-        let found: u32 = stats.iter().map(|s| s.found).sum();
+        let found: u32 = stats.iter().map(|s| s.found + s.second).sum();
         self.frames += 1;
         self.samples_found += u64::from(found);
         self.frames_with_line += u64::from(found > 0);
-        let line = convert::lines_msg(&self.lines, &self.lasers, header.clone());
+        let line = convert::lines_msg(&self.lines, &self.lasers, self.detector.layers(), header.clone());
         out.publish(Output::Line, Msg::LaserLine(Arc::new(line)));
         Ok(())
     }

@@ -26,6 +26,11 @@ xsurf_runtime::parameters! {
         /// laser.<name>.channel (red, green or blue, each laser its own), and may give
         /// laser.<name>.source (double[3] in carm). Several lasers need a colour camera.
         lasers: Vec<String> = Vec::new();
+        /// keep a second surface's line where a row (column) crosses two, as where an object
+        /// hides part of the table: each laser's second line follows the first lines in
+        /// laser_line (field layers 2), and the triangulator, mesher and merger keep it as a
+        /// grid of its own
+        second_surfaces: bool = false;
         /// first column searched
         roi_x_offset ["roi.x_offset"]: u32 = D.roi.x_offset, unit "px";
         /// first row searched

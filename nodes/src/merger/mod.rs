@@ -143,8 +143,9 @@ const MAX_REPORTS: usize = 32;
 /// The merger component.
 pub struct MergerNode {
     cfg: Config,
-    /// Each camera's latest grid of the scan, decoded and checked when it arrived, with its stamp.
-    clouds: BTreeMap<usize, (i64, Grid)>,
+    /// Each camera's latest grid of the scan, decoded and checked when it arrived, with its stamp
+    /// and its lines per laser (2 with second surfaces' lines).
+    clouds: BTreeMap<usize, (i64, Grid, usize)>,
     /// Each camera's image size by its camera_info, once known.
     camera_sizes: BTreeMap<usize, (u32, u32)>,
     /// The current scan's START stamp: an older cloud is a late one of an earlier scan.
@@ -197,6 +198,23 @@ struct Unwritten {
     /// The cameras in the surface.
     names: Vec<String>,
     refinement: Vec<Record>,
+}
+
+/// Every camera's grids (`blocks[camera]`: a grid per laser and line, layer-major) as one list
+/// to fuse into one layer, each named: `cam1`, or `cam1.left` with lasers; a second surfaces'
+/// line's `cam1.second` (`cam1.left.second`).
+fn named_grids(cams: &[String], blocks: Vec<Vec<Grid>>, lasers: &[xsurf_core::rig::RigLaser]) -> (Vec<String>, Vec<Grid>) {
+    let mut names = Vec::new();
+    let mut gs = Vec::new();
+    for (cam, grids) in cams.iter().zip(blocks) {
+        for (j, g) in grids.into_iter().enumerate() {
+            let (k, layer) = (j % lasers.len().max(1), j / lasers.len().max(1));
+            let name = lasers.get(k).map_or_else(|| cam.clone(), |l| format!("{cam}.{}", l.name));
+            names.push(if layer > 0 { format!("{name}.second") } else { name });
+            gs.push(g);
+        }
+    }
+    (names, gs)
 }
 
 impl MergerNode {
@@ -269,14 +287,17 @@ impl MergerNode {
     /// Decodes camera `i`'s cloud and checks it against the camera and the scan: a cloud whose
     /// samples per frame no image of the camera has, or one stamped before this scan's START
     /// (a late cloud of an earlier scan), is refused and the camera's grid so far stays.
-    fn check_cloud(&self, i: usize, c: &PointCloud2) -> Result<Grid, NodeError> {
+    fn check_cloud(&self, i: usize, c: &PointCloud2) -> Result<(Grid, usize), NodeError> {
         let at = convert::fmt_stamp(c.header.stamp.nanos());
         let grid = convert::cloud_grid(c).map_err(|e| NodeError::malformed(format!("cloud at {at}: {e}")))?;
+        // A cloud with the field `layer` holds each laser's second surfaces' line too.
+        let layers = if pointcloud::has_layers(c) { 2 } else { 1 };
         if let Some(&(w, h)) = self.camera_sizes.get(&i) {
             let l = self.cfg.lasers.len().max(1) as u32;
-            if c.height != w * l && c.height != h * l {
+            let k = l * layers as u32;
+            if c.height != w * k && c.height != h * k {
                 return Err(NodeError::contradicts(format!(
-                    "cloud at {at} has {} samples per frame; the camera's {w}x{h} images (camera_info) give {h} (vertical lines) or {w} (horizontal), times {l} laser(s)",
+                    "cloud at {at} has {} samples per frame; the camera's {w}x{h} images (camera_info) give {h} (vertical lines) or {w} (horizontal), times {l} laser(s) and {layers} line(s) per laser",
                     c.height
                 )));
             }
@@ -288,7 +309,7 @@ impl MergerNode {
                 convert::fmt_stamp(start)
             )));
         }
-        Ok(grid)
+        Ok((grid, layers))
     }
 
     /// Merges now if the scan has ended and every camera's final cloud is in: its mesher's
@@ -308,7 +329,7 @@ impl MergerNode {
                 (None, _) => false,
                 // A scan without points: no cloud of it to wait for.
                 (Some(f), _) if f.points == 0 => true,
-                (Some(f), Some((stamp, grid))) => {
+                (Some(f), Some((stamp, grid, _))) => {
                     convert::fmt_stamp(*stamp) == f.stamp && grid.valid() as u64 == f.points
                 }
                 (Some(_), None) => false,
@@ -336,13 +357,16 @@ impl MergerNode {
         if self.clouds.is_empty() {
             return;
         }
-        let stamp = self.clouds.values().map(|(t, _)| *t).max().unwrap_or(0);
+        let stamp = self.clouds.values().map(|(t, _, _)| *t).max().unwrap_or(0);
         let lasers = self.cfg.lasers.clone();
-        // Per camera, one grid per laser (its blocks of samples).
+        // Per camera, one grid per laser and line (its blocks of samples, layer-major).
         let (cams, mut blocks): (Vec<String>, Vec<Vec<Grid>>) = self
             .clouds
             .iter()
-            .map(|(&i, (_, g))| (self.cfg.cameras[i].clone(), g.blocks(lasers.len())))
+            .map(|(&i, (_, g, layers))| {
+                let count = convert::Blocks { lasers: lasers.len(), layers: *layers }.count();
+                (self.cfg.cameras[i].clone(), g.blocks(count))
+            })
             .unzip();
         let (refined, refinement) = self.refine(&cams, &mut blocks);
         if !refined.is_empty() {
@@ -355,15 +379,7 @@ impl MergerNode {
             out.publish(Output::Placements, Msg::Tf(Arc::new(placements)));
             self.save_rig(&refined);
         }
-        // Every camera's and laser's grid (`cam1.left`) into one layer.
-        let mut names = Vec::new();
-        let mut gs = Vec::new();
-        for (cam, grids) in cams.iter().zip(blocks) {
-            for (k, g) in grids.into_iter().enumerate() {
-                names.push(lasers.get(k).map_or_else(|| cam.clone(), |l| format!("{cam}.{}", l.name)));
-                gs.push(g);
-            }
-        }
+        let (names, mut gs) = named_grids(&cams, blocks, &lasers);
         let Merged { surface: merged, meshes, fused_dropped, seam_triangles, vertex_grid } =
             merge_grids(&names, &mut gs, &self.cfg.merge);
         self.fused_dropped += fused_dropped as u64;
@@ -418,9 +434,9 @@ impl MergerNode {
     /// Refines each further camera's placement against the first camera's grid
     /// (`core::merge::refine`); returns the placements refined and, per camera, what happened
     /// (for `refinement.json`). Each decision is logged and counted.
-    /// With several lasers (`blocks[camera][laser]`) the first laser's grids are fitted, and a
-    /// refined camera's further grids are re-triangulated through the refined placement, each
-    /// with its own laser's plane.
+    /// With several lasers or lines (`blocks[camera][block]`, layer-major) the first laser's
+    /// first grids are fitted, and a refined camera's further grids are re-triangulated through
+    /// the refined placement, each with its own laser's plane.
     fn refine(&mut self, names: &[String], blocks: &mut [Vec<Grid>]) -> (Vec<(String, Iso3)>, Vec<Record>) {
         let Some((cfg, plane)) = self.cfg.refine else { return (Vec::new(), Vec::new()) };
         if blocks.len() < 2 {
@@ -444,12 +460,18 @@ impl MergerNode {
             };
             let Ok(from) = placement(&o.record.camera) else { continue };
             let motion = xsurf_core::register::ScanMotion { table_from_carm: motion.first };
-            for (grid, laser) in blocks[k].iter_mut().zip(&self.cfg.lasers).skip(1) {
-                let moved = Plane::from_params(laser.plane).map(|p| {
+            // Every further grid (laser `j % lasers`'s, layer-major) with its laser's plane.
+            let lasers = &self.cfg.lasers;
+            for (j, grid) in blocks[k].iter_mut().enumerate().skip(1) {
+                let (name, laser_plane) = match lasers.get(j % lasers.len().max(1)) {
+                    Some(l) => (l.name.as_str(), Plane::from_params(l.plane)),
+                    None => ("", Some(plane)),
+                };
+                let moved = laser_plane.map(|p| {
                     xsurf_core::register::retriangulate_grid(grid, &from, &report.carm_from_optical, &p, &motion, cfg.max_travel_spread_m)
                 });
                 if let Some(Err(e)) = moved {
-                    log::warn!("merger: {} laser {}: its grid stays where calibration put it: {e}", o.record.camera, laser.name);
+                    log::warn!("merger: {} laser {name:?} grid {j}: it stays where calibration put it: {e}", o.record.camera);
                 }
             }
         }
@@ -867,8 +889,8 @@ impl Component for MergerNode {
     fn handle(&mut self, input: Input, msg: &Msg, out: &mut Out) -> Result<(), NodeError> {
         match (input, msg) {
             (Input::Cloud(i), Msg::Cloud(c)) => {
-                let grid = self.check_cloud(i, c).inspect_err(|_| self.bad_clouds += 1)?;
-                self.clouds.insert(i, (c.header.stamp.nanos(), grid));
+                let (grid, layers) = self.check_cloud(i, c).inspect_err(|_| self.bad_clouds += 1)?;
+                self.clouds.insert(i, (c.header.stamp.nanos(), grid, layers));
                 self.merged_current = false;
                 self.merge_if_complete(out);
                 Ok(())
@@ -1031,7 +1053,7 @@ mod tests {
         let params = Params::resolve(&MergerParams::declarations(), &Default::default()).unwrap();
         let mut m = MergerNode::new(&params).unwrap();
         let mut out = Out::default();
-        let cloud = |samples: usize, frames: usize, sec: i32| {
+        let cloud_of = |samples: usize, frames: usize, sec: i32, blocks: convert::Blocks| {
             let mut g = Grid::new(samples);
             for f in 0..frames {
                 let p = Profile {
@@ -1045,8 +1067,9 @@ mod tests {
             }
             let mut h = xsurf_msgs::std_msgs::Header::default();
             h.stamp.sec = sec;
-            Msg::Cloud(Arc::new(convert::grid_cloud(&g, h)))
+            Msg::Cloud(Arc::new(convert::grid_cloud_blocks(&g, h, blocks)))
         };
+        let cloud = |samples, frames, sec| cloud_of(samples, frames, sec, convert::Blocks::ONE);
         let mut start = ScanEvent { scan_id: 4, event: ScanEvent::START, ..Default::default() };
         start.header.stamp.sec = 10;
         m.handle(Input::Events, &Msg::ScanEvent(Arc::new(start)), &mut out).unwrap();
@@ -1059,8 +1082,14 @@ mod tests {
         let e = m.handle(Input::Cloud(0), &cloud(64, 8, 9), &mut out).unwrap_err().to_string();
         assert!(e.contains("older than scan 4's START at 10.000000000"), "{e}");
         assert_eq!(m.bad_clouds, 2);
-        let (stamp, grid) = &m.clouds[&0];
+        let (stamp, grid, _) = &m.clouds[&0];
         assert_eq!((*stamp, grid.samples(), grid.frames()), (12_000_000_000, 64, 6), "the last good cloud stays");
+        // With second surfaces' lines (the field `layer`) a frame has twice the samples.
+        let two = convert::Blocks { lasers: 0, layers: 2 };
+        let e = m.handle(Input::Cloud(0), &cloud_of(40, 5, 13, two), &mut out).unwrap_err().to_string();
+        assert!(e.contains("has 40 samples per frame; the camera's 64x40 images (camera_info) give 40 (vertical lines) or 64 (horizontal), times 1 laser(s) and 2 line(s) per laser"), "{e}");
+        m.handle(Input::Cloud(0), &cloud_of(80, 5, 14, two), &mut out).unwrap();
+        assert_eq!((m.clouds[&0].1.samples(), m.clouds[&0].2, m.bad_clouds), (80, 2, 3));
         // Camera 2 has no camera_info yet: its cloud is taken as it is.
         m.handle(Input::Cloud(1), &cloud(10, 3, 11), &mut out).unwrap();
         let bad = CameraInfo { width: 64, height: 0, ..Default::default() };

@@ -212,11 +212,14 @@ pub struct MesherNode {
     /// END or ABORT seen, the scan not yet closed: `(aborted, end stamp)`; closed at the end
     /// stamp plus `end_grace_s`, or by the first profile stamped after it.
     closing: Option<(bool, i64)>,
-    /// The last profiles that arrived between scans, `(stamp, profile)`.
-    early: std::collections::VecDeque<(i64, Profile)>,
+    /// The last profiles that arrived between scans, `(stamp, profile, lines per laser)`.
+    early: std::collections::VecDeque<(i64, Profile, usize)>,
     /// Once a scan event has been seen, scans are bounded by events only.
     events_seen: bool,
     grid: Grid,
+    /// Lines per laser in the grid's frames (2: second surfaces' lines, the profiles' field
+    /// `layer`), fixed by the scan's first profile.
+    layers: usize,
     gaps: GapDetector,
     last_cloud_ns: i64,
     /// The last scan's mesh marker, published again between scans.
@@ -319,6 +322,7 @@ impl MesherNode {
             early: Default::default(),
             events_seen: false,
             grid: Grid::default(),
+            layers: 1,
             gaps: GapDetector::default(),
             last_cloud_ns: i64::MIN,
             last_mesh: crate::republish::Republisher::default(),
@@ -360,7 +364,7 @@ impl MesherNode {
         // laser's grid apart.
         let new = self.grid.part(self.growing.from_frame..frames, 1);
         let mut part = Mesh::default();
-        for block in new.blocks(self.cfg.lasers()) {
+        for block in new.blocks(self.blocks().count()) {
             let sub = block.part(0..block.frames(), self.cfg.preview_stride);
             part.append(&xsurf_core::mesh::mesh_grid_frames(&sub, &self.cfg.mesh, 0..sub.frames()));
         }
@@ -376,13 +380,19 @@ impl MesherNode {
         out.publish(Output::Mesh, Msg::Marker(Arc::new(convert::mesh_marker(&part, header, &ns, id, 1.0))));
     }
 
-    fn push(&mut self, stamp: i64, p: &Profile) -> Result<(), NodeError> {
+    /// The blocks of the grid's frames: a block per laser and line.
+    fn blocks(&self) -> convert::Blocks {
+        convert::Blocks { lasers: self.cfg.lasers(), layers: self.layers }
+    }
+
+    /// A profile of `layers` lines per laser into the scan's grid.
+    fn push(&mut self, stamp: i64, p: &Profile, layers: usize) -> Result<(), NodeError> {
         // The grid's size comes from the camera, not from whichever profile arrives first.
-        if let Some(n) = self.samples.filter(|&n| n != p.points.len()) {
+        if let Some(n) = self.samples.map(|n| n * layers).filter(|&n| n != p.points.len()) {
             self.bad_profiles += 1;
             self.account.refused += 1;
             return Err(NodeError::contradicts(format!(
-                "profile has {} samples; the camera (camera_info, {} line, {} laser(s)) gives {n}",
+                "profile has {} samples; the camera (camera_info, {} line, {} laser(s), {layers} line(s) each) gives {n}",
                 p.points.len(),
                 self.cfg.orientation.name(),
                 self.cfg.lasers().max(1)
@@ -390,6 +400,14 @@ impl MesherNode {
         }
         if self.grid.frames() == 0 {
             self.grid = Grid::new(p.points.len());
+            self.layers = layers;
+        } else if layers != self.layers {
+            self.bad_profiles += 1;
+            self.account.refused += 1;
+            return Err(NodeError::contradicts(format!(
+                "profile has {layers} line(s) per laser (its field layer); this scan's grid has {}",
+                self.layers
+            )));
         }
         let before = self.gaps.last_ns;
         let missing = self.gaps.missing(stamp, self.cfg.gap_factor);
@@ -433,8 +451,9 @@ impl MesherNode {
             return;
         }
         self.mesh_done(true, out);
-        // One grid per laser, cleaned and meshed apart; the cloud stacks them again.
-        let mut blocks = self.grid.blocks(self.cfg.lasers());
+        // One grid per laser and line, cleaned and meshed apart; the cloud stacks them again.
+        let layout = self.blocks();
+        let mut blocks = self.grid.blocks(layout.count());
         let (rejected, partial) = blocks.iter_mut().map(|b| b.clean(&self.cfg.mesh)).fold((0, 0), |(r, p), c| {
             (r + c.rejected as u64, p + c.partial_sheet as u64)
         });
@@ -452,7 +471,7 @@ impl MesherNode {
         // made (see `mesh_done`).
         let grid = Grid::stacked(blocks.clone());
         let header = convert::header(stamp, &self.cfg.frame_id);
-        out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_lasers(&grid, header.clone(), self.cfg.lasers()))));
+        out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_blocks(&grid, header.clone(), layout))));
         let scan = ScanMeta {
             scan_id: self.scan_id,
             aborted,
@@ -539,7 +558,8 @@ struct ScanMeta {
     clear_growing: bool,
 }
 
-/// What a closed scan's mesh needs: its cleaned grids (one per laser), and where it goes.
+/// What a closed scan's mesh needs: its cleaned grids (one per laser and line, layer-major),
+/// and where it goes.
 struct MeshJob {
     blocks: Vec<Grid>,
     mesh: MeshConfig,
@@ -567,14 +587,21 @@ impl MeshJob {
     /// namespace `<camera>.<laser>`; writes the camera's PLY file (all lasers).
     fn run(self) -> MeshMade {
         let meshes: Vec<Mesh> = self.blocks.iter().map(|b| mesh_grid(b, &self.mesh)).collect();
+        // A laser's mesh holds its lines' (the blocks are layer-major: block `j` is laser
+        // `j % lasers`'s).
+        let lasers = self.laser_names.len().max(1);
+        let mut per_laser = vec![Mesh::default(); lasers];
+        for (j, m) in meshes.iter().enumerate() {
+            per_laser[j % lasers].append(m);
+        }
         let (mesh, per_laser) = if self.laser_names.is_empty() {
-            (meshes.into_iter().next().unwrap_or_default(), Vec::new())
+            (per_laser.pop().unwrap_or_default(), Vec::new())
         } else {
-            let all = meshes.iter().fold(Mesh::default(), |mut m, b| {
+            let all = per_laser.iter().fold(Mesh::default(), |mut m, b| {
                 m.append(b);
                 m
             });
-            (all, meshes)
+            (all, per_laser)
         };
         let header = self.header;
         let markers: Vec<(Output, Msg)> = if !self.markers {
@@ -606,13 +633,14 @@ impl MesherNode {
     /// A profile: into the scan's grid if it was exposed in the scan; the growing cloud at its rate.
     fn profile(&mut self, c: &PointCloud2, out: &mut Out) -> Result<(), NodeError> {
         let p = convert::cloud_profile(c).map_err(|e| NodeError::malformed(format!("profile: {e}")))?;
+        let layers = if xsurf_msgs::pointcloud::has_layers(c) { 2 } else { 1 };
         if !self.active {
             // Outside a scan bounded by events, frames belong to no scan; the last few
             // are kept, since a frame stamped after START may arrive before the START
             // event. Without any event (a bag of one scan), the first frame with
             // points starts scan 0.
             if self.events_seen {
-                self.early.push_back((c.header.stamp.nanos(), p));
+                self.early.push_back((c.header.stamp.nanos(), p, layers));
                 if self.early.len() > EARLY_FRAMES {
                     self.early.pop_front();
                     self.outside_scan += 1;
@@ -638,12 +666,12 @@ impl MesherNode {
             self.outside_scan += 1;
             return Ok(());
         }
-        self.push(stamp, &p)?;
+        self.push(stamp, &p, layers)?;
         if let Some(period) = self.cfg.cloud_period_ns {
             if stamp.saturating_sub(self.last_cloud_ns) >= period {
                 self.last_cloud_ns = stamp;
                 let h = convert::header(stamp, &self.cfg.frame_id);
-                out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_lasers(&self.grid, h, self.cfg.lasers()))));
+                out.publish(Output::Cloud, Msg::Cloud(Arc::new(convert::grid_cloud_blocks(&self.grid, h, self.blocks()))));
             }
         }
         if self.cfg.mesh_period_ns.is_some_and(|period| stamp.saturating_sub(self.growing.last_ns) >= period) {
@@ -664,10 +692,10 @@ impl MesherNode {
                 self.last_mesh.clear();
                 let start = e.header.stamp.nanos();
                 self.start(e.scan_id, Some(start));
-                for (stamp, p) in std::mem::take(&mut self.early) {
+                for (stamp, p, layers) in std::mem::take(&mut self.early) {
                     if stamp < start {
                         self.outside_scan += 1;
-                    } else if let Err(e) = self.push(stamp, &p) {
+                    } else if let Err(e) = self.push(stamp, &p, layers) {
                         log::warn!("{}: profile at {}: {e}", self.camera, convert::fmt_stamp(stamp));
                     }
                 }
@@ -832,7 +860,7 @@ mod tests {
         };
         let e = m.handle(Input::Profile, &profile(10, 1), &mut out).unwrap_err();
         assert!(
-            e.to_string().contains("profile has 10 samples; the camera (camera_info, vertical line, 1 laser(s)) gives 40"),
+            e.to_string().contains("profile has 10 samples; the camera (camera_info, vertical line, 1 laser(s), 1 line(s) each) gives 40"),
             "{e}"
         );
         for sec in 2..6 {
@@ -908,6 +936,71 @@ mod tests {
         assert_eq!(cloud.valid(), 40 * 19);
         assert!((0..40).all(|s| cloud.point(s, 0)[0].is_nan()));
         assert!((cloud.point(5, 10)[2] - 0.05).abs() < 1e-6, "{:?}", cloud.point(5, 10));
+    }
+
+    /// Profiles with second surfaces' lines (the field `layer`): twice the camera's samples, a
+    /// grid per line cleaned and meshed apart (no triangle joins the lines, though here the
+    /// second continues the first's plane), both in the marker; the cloud keeps the field. A
+    /// profile of the other shape is refused and counted.
+    #[test]
+    fn second_surfaces_lines_are_grids_of_their_own() {
+        #![allow(clippy::unwrap_used)]
+        let (mut m, mut out) = mesher_of_a_64x40_camera();
+        m.set_identity("mesher", "/cam1");
+        let two = convert::Blocks { lasers: 0, layers: 2 };
+        let profile = |f: u32, blocks: convert::Blocks, n: usize| {
+            // The first line on a plane (samples 0-39), the second on its continuation in 10
+            // rows only (samples 40-49 of the second block), NaN elsewhere.
+            let points = (0..n)
+                .map(|s| if s < 50 { [s as f32 * 0.001, f as f32 * 0.002, 0.05] } else { [f32::NAN; 3] })
+                .collect();
+            let p = Profile { points, intensity: vec![50.0; n], rgb: None, range: vec![0.5; n], outside_volume: 0 };
+            let mut h = xsurf_msgs::std_msgs::Header::default();
+            (h.stamp.sec, h.stamp.nanosec) = (2, f * 10_000_000);
+            Msg::Cloud(Arc::new(convert::profile_cloud_blocks(&p, h, blocks)))
+        };
+        let event = |kind: u8, sec: i32| {
+            let mut e = ScanEvent { scan_id: 5, event: kind, ..Default::default() };
+            e.header.stamp.sec = sec;
+            Msg::ScanEvent(Arc::new(e))
+        };
+        m.handle(Input::Events, &event(ScanEvent::START, 1), &mut out).unwrap();
+        for f in 0..20 {
+            m.handle(Input::Profile, &profile(f, two, 80), &mut out).unwrap();
+        }
+        // One line where the camera gives two, and a second line on a one-line camera's count.
+        let e = m.handle(Input::Profile, &profile(20, convert::Blocks::ONE, 80), &mut out).unwrap_err();
+        assert!(e.to_string().contains("profile has 80 samples; the camera (camera_info, vertical line, 1 laser(s), 1 line(s) each) gives 40"), "{e}");
+        let e = m.handle(Input::Profile, &profile(21, two, 40), &mut out).unwrap_err();
+        assert!(e.to_string().contains("profile has 40 samples; the camera (camera_info, vertical line, 1 laser(s), 2 line(s) each) gives 80"), "{e}");
+        assert_eq!((m.frames, m.bad_profiles), (20, 2));
+        m.handle(Input::Events, &event(ScanEvent::END, 3), &mut out).unwrap();
+        m.finish(&mut out);
+        m.settle(&mut out);
+        let cloud = out
+            .items
+            .iter()
+            .rev()
+            .find_map(|(port, msg)| match msg {
+                Msg::Cloud(c) if *port == Output::Cloud => Some(c.clone()),
+                _ => None,
+            })
+            .unwrap();
+        assert_eq!((cloud.height, cloud.width), (80, 20));
+        let points = xsurf_msgs::pointcloud::read(&cloud).unwrap();
+        assert_eq!((points[39 * 20].layer, points[45 * 20].layer), (Some(0.0), Some(1.0)));
+        assert_eq!(points.iter().filter(|p| p.xyz[0].is_finite()).count(), 50 * 20);
+        let marker = out
+            .items
+            .iter()
+            .find_map(|(port, msg)| match msg {
+                Msg::Marker(k) if *port == Output::Mesh && k.ns == "cam1" => Some(k.clone()),
+                _ => None,
+            })
+            .unwrap();
+        // 39 x 19 cells of the first line and 9 x 19 of the second, two triangles each; one
+        // grid would have joined them by 19 cells more.
+        assert_eq!((marker.ns.as_str(), marker.points.len() / 3), ("cam1", 2 * (39 + 9) * 19));
     }
 
     /// While a scan runs the surface grows at `mesh_rate_hz`: parts of the new frames only, in

@@ -236,8 +236,8 @@ impl TriangulatorNode {
             self.points += self.profile.valid() as u64;
             self.outside_volume += u64::from(self.profile.outside_volume);
             let header = convert::header(stamp, &self.cfg.table_frame);
-            let per_laser = (!self.cfg.lasers.is_empty()).then(|| core.first().map_or(0, |l| l.len()));
-            let cloud: PointCloud2 = convert::profile_cloud_lasers(&self.profile, header, per_laser);
+            let blocks = convert::Blocks { lasers: self.cfg.lasers.len(), layers: line.layer_count() };
+            let cloud: PointCloud2 = convert::profile_cloud_blocks(&self.profile, header, blocks);
             out.publish(Output::Profile, Msg::Cloud(Arc::new(cloud)));
             self.tally.count(stamp);
         }
@@ -245,7 +245,8 @@ impl TriangulatorNode {
 }
 
 /// Each laser's line intersected with its own plane, the profiles one after the other in
-/// `profile` (a block of samples per laser).
+/// `profile` (a block of samples per laser; with second lines, every laser's first line, then
+/// every laser's second, each with its laser's plane).
 fn join_profiles(tri: &[Triangulator], lines: &[CoreLine], pose: &xsurf_core::geom::Iso3, part: &mut Profile, profile: &mut Profile) {
     if let ([t], [line]) = (tri, lines) {
         t.triangulate(line, pose, profile);
@@ -259,7 +260,7 @@ fn join_profiles(tri: &[Triangulator], lines: &[CoreLine], pose: &xsurf_core::ge
     let mut rgb = profile.rgb.take().unwrap_or_default();
     rgb.clear();
     let mut colour = false;
-    for (t, line) in tri.iter().zip(lines) {
+    for (t, line) in tri.iter().cycle().zip(lines) {
         t.triangulate(line, pose, part);
         profile.points.extend_from_slice(&part.points);
         profile.intensity.extend_from_slice(&part.intensity);
@@ -519,9 +520,10 @@ mod tests {
         assert_eq!(h.counter("points"), Some(seen as u64));
     }
 
-    /// Two lasers: one line message with a block per laser; each block is intersected with its
-    /// own plane (the collimator's y = 0 and a plane tilted 25 degrees), the profile stacks
-    /// them with the field `laser`, and a line of other lasers than the node's is refused.
+    /// Two lasers, each with a second surface's line: one line message with a block per laser
+    /// and layer (layer-major); each block is intersected with its laser's plane (the
+    /// collimator's y = 0 and a plane tilted 25 degrees), the profile stacks them with the
+    /// fields `laser` and `layer`, and a line of other lasers than the node's is refused.
     #[test]
     fn each_laser_block_is_placed_on_its_own_plane() {
         use xsurf_core::geom::Vec3;
@@ -537,16 +539,18 @@ mod tests {
             image_height: 48,
             orientation: LaserLine::ORIENTATION_VERTICAL,
             lasers: lasers.iter().map(|l| l.name.clone()).collect(),
+            layers: 2,
             ..LaserLine::default()
         };
         let mut truth = Vec::new();
-        for l in lasers {
+        // The first lines on a wavy surface, the second ones on a flat table below it.
+        for (layer, l) in [(0, lasers[0]), (0, lasers[1]), (1, lasers[0]), (1, lasers[1])] {
             let [_, ny, nz, d] = l.plane;
             let mut block = vec![None; n];
             let (mut u, mut v) = (vec![f32::NAN; n], vec![f32::NAN; n]);
             for k in 0..4000 {
                 let x = -0.3 + 0.6 * f64::from(k) / 4000.0;
-                let z = 0.04 + 0.02 * (x * 9.0).cos();
+                let z = if layer == 0 { 0.04 + 0.02 * (x * 9.0).cos() } else { 0.01 };
                 let p = Vec3::new(x, (d - nz * z) / ny, z);
                 let Some((pu, pv)) = model.project(carm_from_optical.inverse().transform_point(p)) else { continue };
                 let row = pv.round();
@@ -591,10 +595,10 @@ mod tests {
         assert!(h.last_error().unwrap().contains("this node's lasers"), "{:?}", h.last_error());
         let out = h.take("/cam2/profile");
         let Msg::Cloud(cloud) = &out[0] else { panic!("a profile is a PointCloud2") };
-        assert_eq!((cloud.height, cloud.width), (96, 1));
+        assert_eq!((cloud.height, cloud.width), (4 * 48, 1));
         let points = xsurf_msgs::pointcloud::read(cloud).unwrap();
         for (r, (p, t)) in points.iter().zip(&truth).enumerate() {
-            assert_eq!(p.laser, Some((r / n) as f32));
+            assert_eq!((p.laser, p.layer), (Some((r / n % 2) as f32), Some((r / n / 2) as f32)));
             match t {
                 Some(t) => {
                     let d = Vec3::new(f64::from(p.xyz[0]), f64::from(p.xyz[1]), f64::from(p.xyz[2])) - *t;
