@@ -86,7 +86,7 @@ fn scan_with(
         let tri = Triangulator::new(cam.geometry().unwrap(), &tri_cfg).unwrap();
         let mut det = EdgeDetector::new(EdgeConfig { method, ..Default::default() }).unwrap();
         // The first line's grid and the second surfaces' (rows where the line crosses two; only
-        // with `second_surfaces`: the nodes keep the first line alone so far).
+        // with `second_surfaces`, as the edge detector's parameter of that name).
         let mut grids = [Grid::new(h as usize), Grid::new(h as usize)];
         let mut lines = [LaserLine::default(), LaserLine::default()];
         let mut prof = Profile::default();
