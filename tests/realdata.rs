@@ -236,8 +236,24 @@ fn robot_laser_line_is_found_in_every_frame_at_the_hand_labels() {
     // median of its neighbours on both sides (where the line steps over a block's edge, a
     // sample agrees with one side; where it climbs a block's edge steeply, a few samples on
     // the climb agree with neither, which allows 6 a frame).
+    // One detector through the frames in order, as a node has it: the last frame's line
+    // chooses among a row's peaks.
+    let mut d = EdgeDetector::new(robot_camera()).unwrap();
+    let mut line = LaserLine::default();
+    let mut labelled = 0;
     for n in 2..=86 {
-        let line = detect(&robot_frame(n), robot_camera());
+        d.detect(&robot_frame(n).view().unwrap(), &mut line).unwrap();
+        for f in robot_labels().iter().filter(|f| f[0] as u32 == n) {
+            let v = f64::from(line.v[f[1] as usize]);
+            assert!(
+                (v - f[2]).abs() <= 1.0,
+                "frame {n} column {} after frame {}: label {}, found {v}",
+                f[1],
+                n - 1,
+                f[2]
+            );
+            labelled += 1;
+        }
         let found = line.found();
         let median = |r: std::ops::Range<usize>| {
             let mut v: Vec<f32> = r.map(|k| line.v[k]).filter(|v| v.is_finite()).collect();
@@ -256,6 +272,7 @@ fn robot_laser_line_is_found_in_every_frame_at_the_hand_labels() {
         assert!(found >= 320, "frame {n}: the line in only {found} columns");
         assert!(jumps <= 6, "frame {n}: {jumps} samples off the line's course");
     }
+    assert_eq!(labelled, 20);
 }
 
 /// `img` with rows and columns swapped (any encoding of whole bytes per pixel).

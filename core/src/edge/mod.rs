@@ -892,6 +892,33 @@ pub struct EdgeDetector {
     plane: Plane,
     /// Per sample of the second line: saturated, and a narrow line's fit.
     second_state: Vec<(bool, Option<Fit>)>,
+    /// The last frame's line: per sample its centre across (NaN where none), and the image's
+    /// size and orientation it belongs to.
+    previous: Previous,
+}
+
+/// The last frame's line, for the next frame's choice among a row's peaks.
+#[derive(Debug, Default, Clone)]
+struct Previous {
+    /// Per sample, the centre across (a vertical line's column), NaN where none.
+    across: Vec<f32>,
+    /// Per sample, the line's strength.
+    strength: Vec<f32>,
+    /// The image's size and the line's orientation.
+    shape: (u32, u32, bool),
+}
+
+impl Previous {
+    /// This frame's line `out` (of an image `w x h`, `vertical` or not), in the buffers of the
+    /// last's.
+    fn remember(mut self, out: &LaserLine, (w, h, vertical): (u32, u32, bool)) -> Previous {
+        self.across.clear();
+        self.across.extend_from_slice(if vertical { &out.u } else { &out.v });
+        self.strength.clear();
+        self.strength.extend_from_slice(&out.strength);
+        self.shape = (w, h, vertical);
+        self
+    }
 }
 
 /// Where a detection reads its signal.
@@ -1042,6 +1069,9 @@ impl Search<'_, '_> {
     }
 }
 
+/// A line near the last frame's continues it when at least this fraction of its strength.
+const PREVIOUS_STRENGTH: f32 = 0.5;
+
 /// A narrow peak is tried again with flanks right beside it when it stands this many times
 /// `min_strength` above the samples two beyond its half-maximum run.
 const NARROW_RETRY: f32 = 2.0;
@@ -1076,6 +1106,18 @@ struct Scratch {
     column_at: Vec<u32>,
     /// The laser's own channel around a found sample (see [`recentre_on_laser`]).
     raw: Vec<u8>,
+}
+
+impl Scratch {
+    /// The buffers for reading `rows` by columns, and each column's first maximum.
+    fn prepare_columns(&mut self, rows: &plane::Rows<'_>) {
+        self.window.resize(rows.rows, 0);
+        self.strips.resize(rows.rows * rows.cols, 0);
+        self.ready.clear();
+        self.ready.resize(rows.cols.div_ceil(16), false);
+        self.column_at.resize(rows.cols, 0);
+        plane::column_argmax(rows, &mut self.column_max, &mut self.column_at);
+    }
 }
 
 /// The first maximum of `p` outside the sorted, possibly overlapping closed ranges `skip`.
@@ -1177,13 +1219,7 @@ impl EdgeDetector {
             Signal::Image => (None, None),
             Signal::Plane(p) => (Some(p), None),
             Signal::Rows(rows) => {
-                let b = &mut self.scratch;
-                b.window.resize(rows.rows, 0);
-                b.strips.resize(rows.rows * rows.cols, 0);
-                b.ready.clear();
-                b.ready.resize(rows.cols.div_ceil(16), false);
-                b.column_at.resize(rows.cols, 0);
-                plane::column_argmax(&rows, &mut b.column_max, &mut b.column_at);
+                self.scratch.prepare_columns(&rows);
                 (None, Some(rows))
             }
         };
@@ -1195,9 +1231,23 @@ impl EdgeDetector {
         let put = |out: &mut LaserLine, state: &mut [(bool, Option<Fit>)], s: u32, peak: Option<Peak>| {
             put_peak(out, state, s, peak, vertical, search.scale)
         };
+        // The last frame's line, where it is of an image like this one.
+        let previous = std::mem::take(&mut self.previous);
+        let before = (previous.shape == (w, h, vertical) && cfg.method != Method::Gradient).then_some(&previous);
         for s in search.outer.clone() {
             stats.searched += 1;
-            let peak = search.sample(s, None, &mut self.scratch);
+            let mut peak = search.sample(s, None, &mut self.scratch);
+            // Where a row holds several peaks, continuity with the last frame chooses: the
+            // strongest candidate stands only if no line continues the last frame's there (as
+            // near as `max_jump_px`, at least half as strong: a highlight or a texture peak does
+            // not displace the line, nor a texture peak where the line was the line that moved
+            // on; a line that moved further is found as before).
+            if let Some(b) = before {
+                let q = b.across[s as usize];
+                if q.is_finite() && peak.as_ref().is_none_or(|p| (p.pos - q).abs() > cfg.max_jump_px) {
+                    peak = continue_last(&search, s, (q, b.strength[s as usize]), peak, &mut self.scratch);
+                }
+            }
             put(out, &mut self.state, s, peak);
         }
         if cfg.method != Method::Gradient {
@@ -1224,6 +1274,7 @@ impl EdgeDetector {
             recentre_on_laser(image, cfg, span.clone(), lane, &mut self.scratch.raw, out);
         }
         (stats.found, stats.saturated) = finish(image, cfg, &self.state, search.outer.clone(), out);
+        self.previous = previous.remember(out, (w, h, vertical));
         let Some(second) = second else { return stats };
         second.reset(cfg.line_orientation, w, h, samples as usize, enc.is_color());
         if cfg.method == Method::Gradient {
@@ -1241,6 +1292,23 @@ impl EdgeDetector {
         self.second_state = state;
         stats
     }
+}
+
+/// Sample `s`'s line where the last frame's (centre `q` across, `strength` in 8-bit grey
+/// levels) is not `peak`'s: the line found within `max_jump_px` of `q`, if it is at least
+/// `PREVIOUS_STRENGTH` as strong and not a fallback; else `peak`. Out of the per-row loop: it
+/// runs only where the line moved or a row's peaks disagree.
+#[cold]
+#[inline(never)]
+fn continue_last(
+    search: &Search<'_, '_>,
+    s: u32,
+    (q, strength): (f32, f32),
+    peak: Option<Peak>,
+    scratch: &mut Scratch,
+) -> Option<Peak> {
+    let continues = |p: &Peak| p.fallback.is_none() && p.strength >= PREVIOUS_STRENGTH * strength * search.scale;
+    search.sample(s, Some((q, search.cfg.max_jump_px)), scratch).filter(continues).or(peak)
 }
 
 /// The second surfaces' samples beside `first` (see [`EdgeDetector::detect_surfaces`]),
@@ -2461,6 +2529,89 @@ mod tests {
         let (mut first, mut second) = (LaserLine::default(), LaserLine::default());
         EdgeDetector::new(grey).unwrap().detect_surfaces(&view, &mut first, &mut second).unwrap();
         assert_eq!(format!("{two:?}"), format!("{:?}", [first, second]));
+    }
+
+    #[test]
+    fn the_last_frames_line_chooses_among_a_rows_peaks() {
+        // A glint brighter than the laser line that looks like one (as wide, along every row)
+        // appears beside it: a detector that saw the line in the last frame keeps the line; a
+        // fresh detector takes the brightest. A line that moved further than `max_jump_px` is
+        // found as without the last frame, and a frame without laser light forgets it.
+        let top = box_line(-0.5, 0.5, 0.0, 2.5);
+        let frame = |line: Option<f64>, glint: bool, seed: u64| {
+            let mut img = image_from(160, 60, |y, a, b| {
+                let mut v = 20.0;
+                if let Some(c) = line {
+                    v += 80.0 * box_line(a, b, c + 0.02 * f64::from(y), 2.5) / top;
+                }
+                if glint {
+                    v += 150.0 * box_line(a, b, 110.0 - 0.03 * f64::from(y), 2.5) / top;
+                }
+                v
+            });
+            add_noise(&mut img, 2.0, seed);
+            img
+        };
+        let near = |out: &LaserLine, c: f64| {
+            (0..60u32).filter(|&y| (f64::from(out.u[y as usize]) - c - 0.02 * f64::from(y)).abs() < 0.3).count()
+        };
+        for m in SUBPIXEL_METHODS {
+            let cfg = EdgeConfig { method: m, ..Default::default() };
+            let both = frame(Some(60.4), true, 51);
+            // Fresh: the glint, the brightest.
+            let fresh = detect(&both, cfg.clone());
+            assert_eq!((near(&fresh, 60.4), fresh.found()), (0, 60), "{m:?}");
+            // After a frame with the line alone: the line.
+            let mut d = EdgeDetector::new(cfg.clone()).unwrap();
+            let mut out = LaserLine::default();
+            d.detect(&frame(Some(59.6), false, 52).view().unwrap(), &mut out).unwrap();
+            d.detect(&both.view().unwrap(), &mut out).unwrap();
+            assert_eq!((near(&out, 60.4), out.found()), (60, 60), "{m:?}");
+            // The line moved 8 px with the glint beside it: the brightest again.
+            d.detect(&frame(Some(68.4), true, 53).view().unwrap(), &mut out).unwrap();
+            assert_eq!(near(&out, 68.4), 0, "{m:?}");
+            // A frame without laser light, then both: the brightest.
+            let mut d = EdgeDetector::new(cfg.clone()).unwrap();
+            d.detect(&frame(Some(59.6), false, 54).view().unwrap(), &mut out).unwrap();
+            d.detect(&frame(None, false, 55).view().unwrap(), &mut out).unwrap();
+            assert_eq!(out.found(), 0, "{m:?}");
+            d.detect(&both.view().unwrap(), &mut out).unwrap();
+            assert_eq!(near(&out, 60.4), 0, "{m:?}");
+        }
+    }
+
+    #[test]
+    fn a_weak_peak_where_the_line_was_does_not_hold_it_back() {
+        // The line moves 15 px between two frames (the camera shook); where it was, a texture
+        // ridge a fifth as strong passes the tests. The moved line is found, not the ridge.
+        let top = box_line(-0.5, 0.5, 0.0, 2.5);
+        let frame = |line: f64, ridge: bool, seed: u64| {
+            let mut img = image_from(160, 60, |y, a, b| {
+                let mut v = 20.0 + 80.0 * box_line(a, b, line + 0.02 * f64::from(y), 2.5) / top;
+                if ridge {
+                    v += 16.0 * box_line(a, b, 60.0 + 0.02 * f64::from(y), 2.5) / top;
+                }
+                v
+            });
+            add_noise(&mut img, 1.0, seed);
+            img
+        };
+        for m in SUBPIXEL_METHODS {
+            let cfg = EdgeConfig { method: m, ..Default::default() };
+            // The ridge alone is a line to the detector.
+            let ridge = detect(
+                &frame(130.0, true, 61),
+                EdgeConfig { roi: Roi { width: 100, ..Default::default() }, ..cfg.clone() },
+            );
+            assert_eq!(ridge.found(), 60, "{m:?}: the ridge passes the tests");
+            let mut d = EdgeDetector::new(cfg).unwrap();
+            let mut out = LaserLine::default();
+            d.detect(&frame(60.0, false, 62).view().unwrap(), &mut out).unwrap();
+            d.detect(&frame(75.0, true, 63).view().unwrap(), &mut out).unwrap();
+            let on_line =
+                (0..60u32).filter(|&y| (f64::from(out.u[y as usize]) - 75.0 - 0.02 * f64::from(y)).abs() < 0.3).count();
+            assert_eq!((on_line, out.found()), (60, 60), "{m:?}");
+        }
     }
 
     #[test]
