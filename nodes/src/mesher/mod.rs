@@ -829,6 +829,13 @@ mod tests {
         }
         assert_eq!(missing, 2);
     }
+    /// Scan `scan_id`'s event `kind` stamped at `sec`.
+    fn scan_event(scan_id: u32, kind: u8, sec: i32) -> Msg {
+        let mut e = ScanEvent { scan_id, event: kind, ..Default::default() };
+        e.header.stamp.sec = sec;
+        Msg::ScanEvent(Arc::new(e))
+    }
+
     /// A mesher with its defaults that has the camera_info of a 64x40 camera.
     fn mesher_of_a_64x40_camera() -> (MesherNode, Out) {
         #![allow(clippy::unwrap_used)]
@@ -889,11 +896,7 @@ mod tests {
     fn contradicted_points_are_rejected_and_reported() {
         #![allow(clippy::unwrap_used)]
         let (mut m, mut out) = mesher_of_a_64x40_camera();
-        let event = |kind: u8, sec: i32| {
-            let mut e = ScanEvent { scan_id: 7, event: kind, ..Default::default() };
-            e.header.stamp.sec = sec;
-            Msg::ScanEvent(Arc::new(e))
-        };
+        let event = |kind: u8, sec: i32| scan_event(7, kind, sec);
         m.handle(Input::Events, &event(ScanEvent::START, 1), &mut out).unwrap();
         for f in 0..20 {
             // A plane, 1 mm between samples and 2 mm between frames; frame 10 has a wrong
@@ -959,11 +962,7 @@ mod tests {
             (h.stamp.sec, h.stamp.nanosec) = (2, f * 10_000_000);
             Msg::Cloud(Arc::new(convert::profile_cloud_blocks(&p, h, blocks)))
         };
-        let event = |kind: u8, sec: i32| {
-            let mut e = ScanEvent { scan_id: 5, event: kind, ..Default::default() };
-            e.header.stamp.sec = sec;
-            Msg::ScanEvent(Arc::new(e))
-        };
+        let event = |kind: u8, sec: i32| scan_event(5, kind, sec);
         m.handle(Input::Events, &event(ScanEvent::START, 1), &mut out).unwrap();
         for f in 0..20 {
             m.handle(Input::Profile, &profile(f, two, 80), &mut out).unwrap();
@@ -1010,11 +1009,7 @@ mod tests {
         #![allow(clippy::unwrap_used)]
         let (mut m, mut out) = mesher_of_a_64x40_camera();
         m.set_identity("mesher", "/cam1");
-        let event = |kind: u8, sec: i32| {
-            let mut e = ScanEvent { scan_id: 2, event: kind, ..Default::default() };
-            e.header.stamp.sec = sec;
-            Msg::ScanEvent(Arc::new(e))
-        };
+        let event = |kind: u8, sec: i32| scan_event(2, kind, sec);
         m.handle(Input::Events, &event(ScanEvent::START, 1), &mut out).unwrap();
         // 2 s at 30 fps over a gentle slope, 2 mm between frames.
         let frames = 60u32;
