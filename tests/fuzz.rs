@@ -813,7 +813,7 @@ fn write_seed_corpus() {
     let mut line = xsurf_core::edge::LaserLine::default();
     let mut det = xsurf_core::edge::EdgeDetector::new(Default::default()).unwrap();
     det.detect(&mono.view().unwrap(), &mut line).unwrap();
-    let line_msg = xsurf_nodes::convert::lines_msg(&[line], &[], 1, hdr(1, "cam1_optical_frame"));
+    let line_msg = xsurf_nodes::convert::lines_msg(&[line], &[], hdr(1, "cam1_optical_frame"));
     put("cdr_laser_line", "mono8.cdr", &enc(&Msg::LaserLine(Arc::new(line_msg))));
     let profile = xsurf_core::triangulate::Profile {
         points: (0..12).map(|i| [0.01 * i as f32, 0.2, 0.3]).collect(),

@@ -118,11 +118,12 @@ pub fn transform_stamped(stamp_ns: i64, parent: &str, child: &str, t: &Iso3) -> 
 }
 
 /// The message form of several lasers' lines in one image: one block of samples per laser, in
-/// the order of `lasers` (empty: one line, the single laser); with `layers` 2, each laser's
-/// second surfaces' line after every laser's first (`lines` layer-major, as
-/// `LaserDetectors::detect` writes them).
-pub fn lines_msg(lines: &[CoreLine], lasers: &[String], layers: usize, header: Header) -> LaserLine {
+/// the order of `lasers` (empty: one line, the single laser); with twice as many lines as
+/// lasers, each laser's second surfaces' line after every laser's first (`lines` layer-major, as
+/// `LaserDetectors::detect` writes them) and `layers` 2.
+pub fn lines_msg(lines: &[CoreLine], lasers: &[String], header: Header) -> LaserLine {
     let first = lines.first();
+    let layers = lines.len() / lasers.len().max(1);
     let cat = |f: fn(&CoreLine) -> &Vec<f32>| lines.iter().flat_map(|l| f(l).iter().copied()).collect::<Vec<f32>>();
     LaserLine {
         header,
@@ -368,6 +369,16 @@ pub fn grid_cloud(g: &Grid, header: Header) -> PointCloud2 {
     })
 }
 
+/// Lines per laser in a profile or grid cloud: 2 where it has the field `layer` (second
+/// surfaces' lines), else 1.
+pub fn cloud_layers(c: &PointCloud2) -> usize {
+    if pointcloud::has_layers(c) {
+        2
+    } else {
+        1
+    }
+}
+
 /// The organized grid of a scanner whose profiles hold `blocks` (a block of samples per laser
 /// and line), with the fields `laser` and `layer` as [`profile_cloud_blocks`] has them.
 pub fn grid_cloud_blocks(g: &Grid, header: Header, blocks: Blocks) -> PointCloud2 {
@@ -489,13 +500,13 @@ mod tests {
         };
         let lasers = ["collimator".to_string(), "left".to_string()];
         let lines = [line(1.0), line(2.0), line(3.0), line(4.0)];
-        let m = lines_msg(&lines, &lasers, 2, Header::default());
+        let m = lines_msg(&lines, &lasers, Header::default());
         assert_eq!((m.layers, m.u.len()), (2, 128));
         let back = core_lines(&m).unwrap();
         assert_eq!(back.iter().map(|l| l.u[0]).collect::<Vec<_>>(), vec![1.0, 2.0, 3.0, 4.0]);
-        assert_eq!(lines_msg(&lines[..2], &lasers, 1, Header::default()).layers, 0);
+        assert_eq!(lines_msg(&lines[..2], &lasers, Header::default()).layers, 0);
         assert_eq!(core_lines(&LaserLine { layers: 3, ..m.clone() }), Err(LineShapeError::Layers(3)));
-        let short = lines_msg(&lines[..2], &lasers, 2, Header::default());
+        let short = LaserLine { layers: 2, ..lines_msg(&lines[..2], &lasers, Header::default()) };
         assert!(matches!(core_lines(&short), Err(LineShapeError::Samples { samples: 64, expected: 128, .. })));
         // The blocks' laser and line, as the profile's fields have them.
         let b = Blocks { lasers: 2, layers: 2 };

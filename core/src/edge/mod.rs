@@ -1347,8 +1347,6 @@ pub struct LaserDetectors {
     colour: Vec<u8>,
     /// Each laser's second surfaces' line too ([`EdgeDetector::detect_surfaces`]).
     second_surfaces: bool,
-    /// The second lines, while they are written (moved out of `outs` and back).
-    seconds: Vec<LaserLine>,
 }
 
 impl LaserDetectors {
@@ -1388,13 +1386,8 @@ impl LaserDetectors {
     pub fn detect(&mut self, image: &ImageView<'_>, outs: &mut Vec<LaserLine>) -> Result<Vec<DetectStats>, EdgeError> {
         let n = self.detectors.len();
         outs.resize_with(n * self.layers(), LaserLine::default);
-        let mut seconds = std::mem::take(&mut self.seconds);
-        seconds.clear();
-        seconds.extend(outs.drain(n..));
-        let r = self.detect_layers(image, &mut outs[..], &mut seconds);
-        outs.append(&mut seconds);
-        self.seconds = seconds;
-        r
+        let (firsts, seconds) = outs.split_at_mut(n);
+        self.detect_layers(image, firsts, seconds)
     }
 
     /// [`LaserDetectors::detect`] into the first lines `outs` and, where `seconds` holds one

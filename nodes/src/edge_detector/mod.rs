@@ -148,7 +148,7 @@ impl EdgeDetectorNode {
         self.frames += 1;
         self.samples_found += u64::from(found);
         self.frames_with_line += u64::from(found > 0);
-        let line = convert::lines_msg(&self.lines, &self.lasers, self.detector.layers(), header.clone());
+        let line = convert::lines_msg(&self.lines, &self.lasers, header.clone());
         out.publish(Output::Line, Msg::LaserLine(Arc::new(line)));
         Ok(())
     }

@@ -291,7 +291,7 @@ impl MergerNode {
         let at = convert::fmt_stamp(c.header.stamp.nanos());
         let grid = convert::cloud_grid(c).map_err(|e| NodeError::malformed(format!("cloud at {at}: {e}")))?;
         // A cloud with the field `layer` holds each laser's second surfaces' line too.
-        let layers = if pointcloud::has_layers(c) { 2 } else { 1 };
+        let layers = convert::cloud_layers(c);
         if let Some(&(w, h)) = self.camera_sizes.get(&i) {
             let l = self.cfg.lasers.len().max(1) as u32;
             let k = l * layers as u32;

@@ -633,7 +633,7 @@ impl MesherNode {
     /// A profile: into the scan's grid if it was exposed in the scan; the growing cloud at its rate.
     fn profile(&mut self, c: &PointCloud2, out: &mut Out) -> Result<(), NodeError> {
         let p = convert::cloud_profile(c).map_err(|e| NodeError::malformed(format!("profile: {e}")))?;
-        let layers = if xsurf_msgs::pointcloud::has_layers(c) { 2 } else { 1 };
+        let layers = convert::cloud_layers(c);
         if !self.active {
             // Outside a scan bounded by events, frames belong to no scan; the last few
             // are kept, since a frame stamped after START may arrive before the START
