@@ -59,6 +59,36 @@ fn clusters(us: &[f64]) -> Vec<(f64, f64, usize)> {
     out
 }
 
+/// Debug aid (`REJ=1` on `report`): what the mesher's cleaning costs, as the coverage of the
+/// points before it and the distance from the surface of the points each of its two rules
+/// rejects (a rule that rejects many points under 1 mm costs coverage for nothing).
+fn rejection_report(grids: &[Grid], clean: &MeshConfig, sc: &Scene, truth: &[Vec3]) {
+    let histogram = |pts: &mut dyn Iterator<Item = [f32; 3]>| {
+        let mut hist = [0usize; 5];
+        for p in pts {
+            let d = sc.signed_distance(Vec3::new(p[0].into(), p[1].into(), p[2].into())).abs() * 1e3;
+            hist[[1.0, 2.0, 5.0, 20.0].iter().filter(|&&b| d >= b).count()] += 1;
+        }
+        hist
+    };
+    let raw: Vec<[f32; 3]> =
+        grids.iter().flat_map(|g| g.points().iter().copied()).filter(|p| p[0].is_finite()).collect();
+    for (k, g) in grids.iter().enumerate() {
+        let partial = g.partial_sheet(clean.partial_sheet_ratio, clean.max_edge_m);
+        let mut kept = g.clone();
+        kept.reject_contradicted(clean.outlier_tolerance_m, clean.max_edge_m);
+        let mut contradicted = (0..g.points().len())
+            .filter(|&i| g.points()[i][0].is_finite() && kept.points()[i][0].is_nan())
+            .map(|i| g.points()[i]);
+        eprintln!(
+            "  line {k}: rejected under 1 / 1-2 / 2-5 / 5-20 / over 20 mm from the surface, partly reached {:?}, contradicted {:?}",
+            histogram(&mut partial.iter().map(|&i| g.points()[i])),
+            histogram(&mut contradicted)
+        );
+    }
+    eprintln!("  coverage before the cleaning {:.2} %", coverage(truth, &raw, 0.003) * 100.0);
+}
+
 fn scan(scene: &str, size: (u32, u32), encoding: Encoding, speed: f64, method: Method) -> Vec<Camera> {
     scan_with(scene, size, encoding, speed, method, std::env::var("SECOND").is_ok())
 }
@@ -111,6 +141,7 @@ fn scan_with(
         }
         // The mesher's own preparation: points their neighbours contradict are rejected.
         let clean = MeshConfig { fill_single_holes: false, ..Default::default() };
+        std::env::var("REJ").is_ok().then(|| rejection_report(&grids, &clean, sc, &truth));
         let rejected: usize = grids.iter_mut().map(|g| g.clean(&clean).rejected).sum();
         let second = grids[1].valid();
         let pts: Vec<[f32; 3]> =
@@ -389,6 +420,18 @@ fn probe_outliers() {
 #[test]
 #[ignore]
 fn report() {
+    if let Ok(only) = std::env::var("ONLY") {
+        let p: Vec<&str> = only.split(',').collect();
+        let enc = if p[2] == "rgb8" { Encoding::Rgb8 } else { Encoding::Mono8 };
+        scan(
+            p[0],
+            (p[1].parse().unwrap(), p[1].parse::<u32>().unwrap() * 3 / 4),
+            enc,
+            p[3].parse().unwrap(),
+            Method::CenterOfGravity,
+        );
+        return;
+    }
     for (scene, speed) in [("pyramid", 0.070), ("phantom", 0.070), ("body", 0.140)] {
         for size in [(320, 240), (640, 480)] {
             for enc in [Encoding::Mono8, Encoding::Rgb8] {
@@ -409,10 +452,11 @@ fn probe_dark_misses() {
     let geo = rig.cameras[cam].geometry().unwrap();
     let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
     let mut line = LaserLine::default();
+    let all = std::env::var("ALL").is_ok();
     let (mut shown, mut missed, mut total) = (0, 0, 0);
     for f in 0..s.frame_count() {
         let band: Vec<Vec3> =
-            s.observable_points(cam, f, 15.0).into_iter().filter(|p| s.scene.in_band(*p, BAND_EDGE_M)).collect();
+            s.observable_points(cam, f, 15.0).into_iter().filter(|p| all || s.scene.in_band(*p, BAND_EDGE_M)).collect();
         if band.is_empty() {
             continue;
         }
@@ -437,6 +481,16 @@ fn probe_dark_misses() {
                 continue;
             }
             missed += 1;
+            if all {
+                let off =
+                    s.render_at(cam, &xsurf_core::pose::table_from_carm(ft.travel_m, 0.0, 0.0), false, u64::from(f));
+                let (on_v, off_v) = (img.view().unwrap(), off.view().unwrap());
+                let amp = ((u - 1.5).round().max(0.0) as u32..=((u + 1.5).round() as u32).min(h * 4 / 3 - 1))
+                    .map(|x| i32::from(on_v.rgb_at(x, v as u32)[0]) - i32::from(off_v.rgb_at(x, v as u32)[0]))
+                    .max()
+                    .unwrap_or(0);
+                eprintln!("amp frame {f} row {v} u {u:.1}: {amp}");
+            }
             if shown < limit {
                 shown += 1;
                 let row = img.view().unwrap();
