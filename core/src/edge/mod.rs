@@ -969,7 +969,20 @@ struct Search<'a, 'b> {
     vertical: bool,
     scale: f32,
     saturation: f32,
+    /// The line's typical width in the last frames (pixels), once known: a row's candidate
+    /// far wider is tried last (see [`WIDE_PEAK_TOLERANCE`]).
+    typical_width: Option<f32>,
 }
+
+/// A row's candidate more than this many times the line's typical width (of the last frames)
+/// is a glossy highlight or a bright blur sooner than the line: it is kept as a fallback, and
+/// the row's other candidates are tried first. The hard body's highlights at 320x240 are 7-14
+/// px wide against a line of about 2, brighter than the dim line on the hair beside them,
+/// which was never tried. Well above what a line's own rows reach: on the body's curves at
+/// 320x240 a run's rows are 1.4-4 px wide where the frame's typical width is under 2, and the
+/// robot's real line, smeared by the camera's motion, 1.9 times its typical width. (2, 3 and 4
+/// give the same hard report.)
+const WIDE_PEAK_TOLERANCE: f32 = 4.0;
 
 impl Search<'_, '_> {
     /// The line in sample `s`: the strongest peak that passes every test (up to
@@ -1023,6 +1036,16 @@ impl Search<'_, '_> {
         self.locate(&buf.strips[k * n..(k + 1) * n], near, &mut buf.contrast_u8)
     }
 
+    /// For a candidate far wider than the line's typical width (`WIDE_PEAK_TOLERANCE`): the
+    /// samples it spans, which the row's next search leaves out.
+    fn too_wide(&self, peak: &Peak, n: usize) -> Option<(usize, usize)> {
+        let t = self.typical_width?;
+        (peak.width > WIDE_PEAK_TOLERANCE * t).then(|| {
+            let reach = 0.5 * peak.width + 1.0;
+            ((peak.pos - reach).max(0.0) as usize, ((peak.pos + reach) as usize).min(n.saturating_sub(1)))
+        })
+    }
+
     fn locate<S: Sample>(&self, p: &[S], near: Option<(f32, f32)>, contrast: &mut Vec<S>) -> Option<Peak> {
         let cfg = self.cfg;
         if cfg.method == Method::Gradient {
@@ -1049,7 +1072,7 @@ impl Search<'_, '_> {
             };
             let Some(m) = m else { continue };
             match find_peak(p, m, cfg, self.scale, self.saturation) {
-                Ok(peak) => match peak.fallback {
+                Ok(peak) => match peak.fallback.or_else(|| self.too_wide(&peak, p.len())) {
                     None => return Some(peak),
                     Some(run) => {
                         // Kept for when no other candidate is a line; the next search goes on
@@ -1223,8 +1246,8 @@ impl EdgeDetector {
                 (None, Some(rows))
             }
         };
-        let scale = level_scale(enc);
-        let search = Search { image, cfg, plane, columns, outer, inner, vertical, scale, saturation: enc.max_value() };
+        let (scale, saturation, typical_width) = (level_scale(enc), enc.max_value(), self.width_px);
+        let search = Search { image, cfg, plane, columns, outer, inner, vertical, scale, saturation, typical_width };
         let mut stats = DetectStats::default();
         self.state.clear();
         self.state.resize(samples as usize, (false, None));
@@ -2266,6 +2289,35 @@ mod tests {
             for (y, &u) in out.u.iter().enumerate() {
                 assert!((u - 40.3).abs() < 0.15, "{m:?} row {y}: {u}: {:?}", &img.data[y * 120 + 20..y * 120 + 76]);
             }
+        }
+    }
+
+    #[test]
+    fn a_wide_highlight_brighter_than_the_line_yields_to_it_once_the_line_is_known() {
+        // The hard body's hair at 320x240: a dim line (35 grey levels over the hair, 2 px)
+        // and, in the same rows 25 px on, a glossy highlight on the skin 13 px wide and three
+        // times as bright (here in every row: nothing else anchors the line). The highlight passes a row's tests as a peak; the line was never
+        // tried, and the highlight's run, too short for its width, was dropped after.
+        let top = box_line(-0.5, 0.5, 0.0, 2.0);
+        let line = |y: u32, a: f64, b: f64, c: f64| 35.0 * box_line(a, b, c + 0.05 * f64::from(y), 2.0) / top;
+        let glint = |a: f64| 100.0 * (-(a + 0.5 - 85.0).powi(2) / (2.0 * 5.5f64.powi(2))).exp();
+        // The frame before shows the line's width elsewhere (so the last frame's line does not
+        // choose here).
+        let mut plain = image_from(140, 100, |y, a, b| 8.0 + line(y, a, b, 25.0));
+        let mut both = image_from(140, 100, |y, a, b| 8.0 + line(y, a, b, 60.0) + glint(a));
+        add_noise(&mut plain, 1.5, 41);
+        add_noise(&mut both, 1.5, 42);
+        let rows = |out: &LaserLine| (0..100).filter(|&y| (out.u[y] - (60.0 + 0.05 * y as f32)).abs() < 0.5).count();
+        for m in SUBPIXEL_METHODS {
+            let cfg = EdgeConfig { method: m, ..Default::default() };
+            // A detector that saw the line's width in the frame before finds it in every row.
+            let mut d = EdgeDetector::new(cfg.clone()).unwrap();
+            let mut out = LaserLine::default();
+            d.detect(&plain.view().unwrap(), &mut out).unwrap();
+            d.detect(&both.view().unwrap(), &mut out).unwrap();
+            assert_eq!((rows(&out), out.found()), (100, 100), "{m:?}: {:?}", &out.u[..]);
+            // A fresh one does not know the line's width: the highlight takes the rows.
+            assert_eq!(rows(&detect(&both, cfg)), 0, "{m:?}");
         }
     }
 
