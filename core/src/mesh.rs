@@ -1074,7 +1074,7 @@ mod tests {
         for &(s, f) in &wrong {
             assert!(g.point(s, f)[0].is_nan(), "sample {s} of frame {f} kept");
         }
-        // A point beside a wrong one may lose the predictions through it and go too (one here).
+        // A point beside a wrong one may lose the predictions through it and go too.
         let lost_beside = (0..nf)
             .flat_map(|f| (0..ns).map(move |s| (s, f)))
             .filter(|&(s, f)| !wrong.contains(&(s, f)) && g2.point(s, f)[0].is_finite() && g.point(s, f)[0].is_nan())

@@ -2296,8 +2296,8 @@ mod tests {
     fn a_wide_highlight_brighter_than_the_line_yields_to_it_once_the_line_is_known() {
         // The hard body's hair at 320x240: a dim line (35 grey levels over the hair, 2 px)
         // and, in the same rows 25 px on, a glossy highlight on the skin 13 px wide and three
-        // times as bright (here in every row: nothing else anchors the line). The highlight passes a row's tests as a peak; the line was never
-        // tried, and the highlight's run, too short for its width, was dropped after.
+        // times as bright (here in every row, so that no run of the line's own anchors it). The
+        // highlight passes a row's tests as a peak, so the line was never tried.
         let top = box_line(-0.5, 0.5, 0.0, 2.0);
         let line = |y: u32, a: f64, b: f64, c: f64| 35.0 * box_line(a, b, c + 0.05 * f64::from(y), 2.0) / top;
         let glint = |a: f64| 100.0 * (-(a + 0.5 - 85.0).powi(2) / (2.0 * 5.5f64.powi(2))).exp();
