@@ -240,10 +240,10 @@ fn robot_laser_line_is_found_in_every_frame_at_the_hand_labels() {
     // chooses among a row's peaks.
     let mut d = EdgeDetector::new(robot_camera()).unwrap();
     let mut line = LaserLine::default();
-    let mut labelled = 0;
+    let (labels, mut labelled) = (robot_labels(), 0);
     for n in 2..=86 {
         d.detect(&robot_frame(n).view().unwrap(), &mut line).unwrap();
-        for f in robot_labels().iter().filter(|f| f[0] as u32 == n) {
+        for f in labels.iter().filter(|f| f[0] as u32 == n) {
             let v = f64::from(line.v[f[1] as usize]);
             assert!(
                 (v - f[2]).abs() <= 1.0,
