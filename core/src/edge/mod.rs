@@ -278,7 +278,8 @@ pub struct EdgeConfig {
     /// whatever the method: every thresholded or three-point estimate locks to pixel centres
     /// there.
     pub narrow_width_px: f32,
-    /// Peaks tried per row, strongest first, until one passes every test.
+    /// Peaks tried per row until one passes every test: the brightest, the one of highest
+    /// contrast, then the next brightest (each outside the peaks already refused).
     pub max_candidates: u32,
     /// Samples of a line run along at least this many consecutive rows (columns); shorter runs
     /// (noise, texture, a highlight) are dropped, and a frame without laser light gives none.
@@ -653,10 +654,12 @@ fn find_peak<S: Sample>(
     // pixels wide, its other half would be taken for its background).
     let base = p[m.saturating_sub(2)].f().min(p[(m + 2).min(n - 1)].f());
     let (llo, lhi) = S::run(p, m, 2, S::cut(base + 0.5 * (peak - base)));
-    let clear = |(a, b): (usize, usize)| {
-        a >= 2 && b + 2 < n && peak - p[a - 2].f().max(p[b + 2].f()) >= NARROW_RETRY * cfg.min_strength * scale
+    let clear_by = |(a, b): (usize, usize), by: f32| {
+        a >= 2 && b + 2 < n && peak - p[a - 2].f().max(p[b + 2].f()) >= by * cfg.min_strength * scale
     };
-    let Some((glo, ghi)) = [(lo.min(llo), hi.max(lhi)), (lo, hi)].into_iter().find(|&r| clear(r)) else {
+    let clear = |r| clear_by(r, NARROW_RETRY);
+    let Some((glo, ghi)) = [(lo.min(llo), hi.max(lhi)), (lo, hi)].into_iter().find(|&r| clear_by(r, STRIPE_RETRY))
+    else {
         return first;
     };
     let level = f0.mean + 0.5 * (peak - f0.mean);
@@ -1060,7 +1063,8 @@ impl Search<'_, '_> {
         }
         // Brightest first, then the sample of the highest peak contrast (a dim line in a dark
         // region beside brighter surfaces is not the row's brightest), then the brightest
-        // again; a refused peak's run is left out of the next search.
+        // again; a refused peak's run is left out of the next search. (A third try by contrast
+        // found a textured ridge 32 rows long in a real laser-off photograph.)
         let mut refused: [(usize, usize); 16] = [(0, 0); 16];
         let mut fallback = None;
         for k in 0..cfg.max_candidates as usize {
@@ -1072,23 +1076,29 @@ impl Search<'_, '_> {
             };
             let Some(m) = m else { continue };
             match find_peak(p, m, cfg, self.scale, self.saturation) {
-                Ok(peak) => match peak.fallback.or_else(|| self.too_wide(&peak, p.len())) {
-                    None => return Some(peak),
-                    Some(run) => {
-                        // Kept for when no other candidate is a line; the next search goes on
-                        // as after a refused peak.
-                        refused[k] = run;
-                        refused[..=k].sort_unstable();
-                        fallback = fallback.or(Some(peak));
+                Ok(peak) => {
+                    let wide = self.too_wide(&peak, p.len());
+                    match peak.fallback.or(wide) {
+                        None => return Some(peak),
+                        Some(run) => {
+                            // Kept for when no other candidate is a line; the next search goes
+                            // on as after a refused peak. A candidate far wider than the line
+                            // yields to a later fallback that is not.
+                            refused[k] = run;
+                            refused[..=k].sort_unstable();
+                            if fallback.as_ref().is_none_or(|(_, w)| *w && wide.is_none()) {
+                                fallback = Some((peak, wide.is_some()));
+                            }
+                        }
                     }
-                },
+                }
                 Err(run) => {
                     refused[k] = run;
                     refused[..=k].sort_unstable();
                 }
             }
         }
-        fallback
+        fallback.map(|(peak, _)| peak)
     }
 }
 
@@ -1098,6 +1108,10 @@ const PREVIOUS_STRENGTH: f32 = 0.5;
 /// A narrow peak is tried again with flanks right beside it when it stands this many times
 /// `min_strength` above the samples two beyond its half-maximum run.
 const NARROW_RETRY: f32 = 2.0;
+
+/// A narrow line in a dark stripe between brighter surfaces is tried again when it stands this
+/// many times `min_strength` above the samples two beyond its half-maximum run.
+const STRIPE_RETRY: f32 = 1.5;
 
 /// The flanks of a narrow line tried again start this many line widths (FWHM) from the peak.
 const GAP_PER_WIDTH: f32 = 1.2;
@@ -2322,6 +2336,35 @@ mod tests {
     }
 
     #[test]
+    fn a_highlight_far_wider_than_the_line_yields_to_a_line_found_as_a_fallback() {
+        // The hard body at 320x240: a glossy highlight 10 px wide, the row's brightest, and the
+        // dim line (20 grey levels) in a dark stripe (12) between two surfaces (40), dimmer than
+        // they are. Both are fallbacks: the highlight as far wider than the line, the line as
+        // found only with the stripe's own dark flanks. The first fallback used to take the row.
+        let top = box_line(-0.5, 0.5, 0.0, 1.6);
+        let glint = |a: f64| 100.0 * (-((a + 0.5 - 100.0) / 6.0).powi(2)).exp();
+        let line = |a: f64, b: f64, c: f64| 20.0 * box_line(a, b, c, 1.6) / top;
+        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
+        let stripe = |a: f64| 1.0 - smooth(a + 0.5 - 143.0) * smooth(157.0 - a - 0.5);
+        // The frame before shows the line's width elsewhere (so the last frame's line does not
+        // choose here).
+        let mut plain = image_from(200, 60, |_, a, b| 40.0 + line(a, b, 175.0));
+        let mut both =
+            image_from(200, 60, |y, a, b| 12.0 + 28.0 * stripe(a) + glint(a) + line(a, b, 150.0 + 0.05 * f64::from(y)));
+        add_noise(&mut plain, 1.0, 51);
+        add_noise(&mut both, 1.0, 53);
+        let rows = |out: &LaserLine| (0..60).filter(|&y| (out.u[y] - (150.0 + 0.05 * y as f32)).abs() < 0.5).count();
+        for m in SUBPIXEL_METHODS {
+            let cfg = EdgeConfig { method: m, ..Default::default() };
+            let mut d = EdgeDetector::new(cfg.clone()).unwrap();
+            let mut out = LaserLine::default();
+            d.detect(&plain.view().unwrap(), &mut out).unwrap();
+            d.detect(&both.view().unwrap(), &mut out).unwrap();
+            assert_eq!((rows(&out), out.found()), (60, 60), "{m:?}: {:?}", &out.u[..]);
+        }
+    }
+
+    #[test]
     fn bright_face_ending_beside_the_line_does_not_pull_it() {
         // A saturated line at the edge of a bright face (a glossy face under room light, 80
         // grey levels over the table) that ends 6 px on, before the right flank: the flank then
@@ -2443,6 +2486,44 @@ mod tests {
             9.0 + 36.0 * (smooth(x - 7.0) + smooth(-x - 7.0))
         });
         add_noise(&mut img, 2.0, 37);
+        for m in SUBPIXEL_METHODS {
+            assert_eq!(detect(&img, EdgeConfig { method: m, ..Default::default() }).found(), 0, "{m:?}");
+        }
+    }
+
+    #[test]
+    fn dim_line_at_the_stated_snr_in_a_dark_stripe_is_found() {
+        // The body's hair and the pyramid's print at 320x240 in grey: a line 18 grey levels over
+        // a dark stripe (9) 12 px wide between brighter surfaces (45 and 70), under noise of 1.5
+        // levels. Its brightest pixel stands 12.6-18 levels over the stripe, by its phase: a
+        // signal-to-noise ratio of 8.4-12, above the stated 8, and often under twice
+        // `min_strength` over the samples beside it (with that bound, as before
+        // `STRIPE_RETRY`, it was found in 24-31 of the 60 rows).
+        let top = box_line(-0.5, 0.5, 0.0, 1.4);
+        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
+        let stripe = |y: u32| 60.0 + 0.05 * f64::from(y);
+        let surfaces = |y: u32, a: f64| {
+            let x = a + 0.5 - stripe(y);
+            9.0 + 36.0 * smooth(-x - 6.0) + 61.0 * smooth(x - 6.0)
+        };
+        for offset in [-1.0, 0.0, 1.0] {
+            let centre = |y: u32| stripe(y) + offset;
+            let mut img = image_from(120, 60, |y, a, b| surfaces(y, a) + 18.0 * box_line(a, b, centre(y), 1.4) / top);
+            add_noise(&mut img, 1.5, 41);
+            for m in SUBPIXEL_METHODS {
+                let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+                let errs: Vec<f64> = (0..60u32)
+                    .filter_map(|y| Some(f64::from(out.u[y as usize]) - centre(y)).filter(|e| e.is_finite()))
+                    .collect();
+                let what = format!("{m:?}, {offset} px from the stripe's middle");
+                assert!(errs.len() >= 54, "{what}: found in {} of 60 rows", errs.len());
+                let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+                assert!(rms < 0.3, "{what}: rms {rms:.3} px");
+            }
+        }
+        // The stripe alone, without the line, gives nothing.
+        let mut img = image_from(120, 60, |y, a, _| surfaces(y, a));
+        add_noise(&mut img, 1.5, 43);
         for m in SUBPIXEL_METHODS {
             assert_eq!(detect(&img, EdgeConfig { method: m, ..Default::default() }).found(), 0, "{m:?}");
         }
