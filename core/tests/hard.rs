@@ -607,7 +607,8 @@ fn probe_two_surfaces() {
 /// Debug aid: the truth points the points leave uncovered (none within 3 mm after the mesher's
 /// cleaning), by why: covered before the cleaning; the row had no sample; its sample lies more
 /// than 2 px from the true column (another candidate); or it lies there and its point is still
-/// off. The print (dark band) is counted apart. `SCENE`, `W`, `RGB`, `CAM`, `SPEED`.
+/// off. The print (dark band) is counted apart; the frames that lose most are listed (`BY`).
+/// `SCENE`, `W`, `RGB`, `CAM`, `SPEED`.
 #[test]
 #[ignore]
 fn probe_uncovered() {
@@ -678,7 +679,9 @@ fn probe_uncovered() {
         );
     }
     let mut worst: Vec<_> = by_frame.into_iter().collect();
-    worst.sort_by_key(|(_, w)| std::cmp::Reverse(w.iter().sum::<usize>()));
+    // `BY=k`: the frames sorted by that reason's count (0-3 as above), else by all.
+    let by: Option<usize> = std::env::var("BY").ok().and_then(|v| v.parse().ok());
+    worst.sort_by_key(|(_, w)| std::cmp::Reverse(by.map_or(w.iter().sum::<usize>(), |k| w[k])));
     for (f, w) in worst.iter().take(15) {
         eprintln!("  frame {f}: {w:?}");
     }
