@@ -615,9 +615,8 @@ fn probe_uncovered() {
     let (s, rig, cam, h) = probe_scan("body", 320);
     let poses = poses_of(&s);
     let geo = rig.cameras[cam].geometry().unwrap();
-    let tri =
-        Triangulator::new(geo.clone(), &TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() })
-            .unwrap();
+    let tri_cfg = TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() };
+    let tri = Triangulator::new(geo.clone(), &tri_cfg).unwrap();
     let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
     let (mut line, mut prof) = (LaserLine::default(), Profile::default());
     let mut grid = Grid::new(h as usize);
@@ -628,7 +627,8 @@ fn probe_uncovered() {
         tri.triangulate(&line, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
         grid.push(ft.stamp_ns, &prof).unwrap();
         lines.push(line.clone());
-        truth.extend(s.observable_points(cam, f, 15.0).into_iter().map(|p| (f as usize, p)));
+        // What the camera observes, as the `report` counts it.
+        truth.extend(s.observable_points(cam, f, tri_cfg.min_ray_plane_angle_deg).into_iter().map(|p| (f as usize, p)));
     }
     let v3 = |p: &[f32; 3]| Vec3::new(p[0].into(), p[1].into(), p[2].into());
     let hash =
