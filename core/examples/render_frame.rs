@@ -1,5 +1,6 @@
 //! Renders one frame of a synthetic scan to a PGM/PPM file, to look at what the scanner makes:
-//! `cargo run --release -p xsurf-core --example render_frame -- SCENE WxH ideal|hard mono8|rgb8 FRAME OUT`.
+//! `cargo run --release -p xsurf-core --example render_frame -- SCENE WxH ideal|hard mono8|rgb8 FRAME OUT`
+//! (`CAM=1`: the second camera; `SPEED`: the C-arm's speed in m/s, else the default's).
 #![allow(clippy::unwrap_used, missing_docs)]
 
 use xsurf_core::image::Encoding;
@@ -12,6 +13,9 @@ fn main() {
     let preset = Preset::parse(&a[2]).unwrap();
     let encoding = if a[3] == "rgb8" { Encoding::Rgb8 } else { Encoding::Mono8 };
     let mut settings = ScanSettings { encoding, ..Default::default() };
+    if let Ok(v) = std::env::var("SPEED") {
+        settings.speed_mps = v.parse().unwrap();
+    }
     preset.apply(&mut settings);
     let s = Scanner::new(Scene::by_name(&a[0]).unwrap(), Rig::study(w, h), preset.laser(), settings).unwrap();
     let f: u32 = a[4].parse().unwrap();
