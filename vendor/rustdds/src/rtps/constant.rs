@@ -24,6 +24,12 @@ pub const CACHE_CLEAN_PERIOD: Duration = Duration::from_secs(4);
 // application reads them. Fast DDS uses 5 ms, Connext 0.
 pub const NACK_RESPONSE_DELAY: Duration = Duration::from_millis(5);
 pub const NACK_SUPPRESSION_DURATION: Duration = Duration::from_millis(0);
+// xsurf patch (see XSURF-PATCH.md): a NACK_FRAG is answered at once (upstream
+// after NACK_RESPONSE_DELAY). It names the fragments a reader still lacks of the
+// sample it is assembling, and the reader asks again only after the next
+// HEARTBEAT, so every delay here is added to each repair round of a large
+// sample.
+pub const NACKFRAG_RESPONSE_DELAY: Duration = Duration::from_millis(0);
 
 // Time between two repair rounds (SendRepairData, SendRepairFrags) for one
 // reader, and the backoff while the reader's send socket has queued control
@@ -53,11 +59,11 @@ pub const REPAIR_FRAGS_PER_ROUND: usize = 256;
 // the Writer's `heartbeat_period` field.
 pub const HEARTBEAT_PERIOD_SLOW: crate::structure::duration::Duration =
   crate::structure::duration::Duration::from_secs(1);
-// xsurf patch (see XSURF-PATCH.md): 10 ms (upstream 100 ms). A reader asks
+// xsurf patch (see XSURF-PATCH.md): 2 ms (upstream 100 ms). A reader asks
 // for missing fragments in answer to a HEARTBEAT, so this period paces the
 // repair of a large sample.
 pub const HEARTBEAT_PERIOD_FAST: crate::structure::duration::Duration =
-  crate::structure::duration::Duration::from_millis(10);
+  crate::structure::duration::Duration::from_millis(2);
 
 // Fallback upper bound on the number of CacheChanges a Writer retains in its
 // history when the Writer QoS does not specify ResourceLimits.max_samples. This
