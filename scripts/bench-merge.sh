@@ -11,6 +11,8 @@
 # usage: bash scripts/bench-merge.sh [SCANS] [SIZE] [MODES]
 #   SCANS: scans per mode (default 10); SIZE: 640x480 (default) or 1920x1200;
 #   MODES: "separate composed" (default both)
+#   REPUBLISH_S: the merger's republish_s (default 2); WORK: the work folder (default a new
+#   one under /tmp); XSURF_BIN: prebuilt binaries
 # The peer runs with Cyclone DDS's defaults; CYCLONEDDS_URI in the environment configures it (for
 # instance a larger SocketReceiveBufferSize, as BENCHMARKS.md measured). The graph's nodes do not
 # read it.
@@ -19,9 +21,15 @@ cd "$(dirname "$0")/.."
 scans=${1:-10}
 size=${2:-640x480}
 modes=${3:-separate composed}
-cargo build --release -p xsurf-nodes --bins >/dev/null
-bin=$PWD/target/release
-work=$(mktemp -d /tmp/xsurf-bench-merge.XXXXXX)
+# XSURF_BIN: the folder of binaries already built (a test's), instead of building them here.
+if [[ -n ${XSURF_BIN:-} ]]; then
+  bin=$XSURF_BIN
+else
+  cargo build --release -p xsurf-nodes --bins >/dev/null
+  bin=$PWD/target/release
+fi
+work=${WORK:-$(mktemp -d /tmp/xsurf-bench-merge.XXXXXX)}
+mkdir -p "$work"
 netns=$PWD/../shared/tools/netns-run
 frames=$work/frames
 "$bin/xsurf" synth body -o "$frames" --size "$size" --speed 0.124 --frames 390 >/dev/null
