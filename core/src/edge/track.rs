@@ -338,9 +338,8 @@ fn faded_body(line: &LaserLine, r: &Run, scratch: &mut Vec<f32>) -> Option<usize
 /// by its length.
 ///
 /// With the line's typical width from earlier frames (`typical_width_px`), a run under
-/// `WIDE_RUNS` times `min_run` whose median width is more than `WIDE_RUN_TOLERANCE` times that is
-/// dropped too: a
-/// highlight, or a bright mark, in a frame after the laser went off.
+/// `WIDE_RUNS` times `min_run` whose median width is more than `WIDE_RUN_TOLERANCE` times that
+/// is dropped too: a highlight, or a bright mark, in a frame after the laser went off.
 pub(super) fn drop_short_runs(
     line: &mut LaserLine,
     cfg: &EdgeConfig,
@@ -503,7 +502,8 @@ mod tests {
         for (i, s) in l.strength.iter_mut().enumerate() {
             *s = 20.0 + i as f32;
         }
-        // The row's other rows have no line: the run does not span the region.
+        // No line in the last 11 rows: the run does not span the region (a run that does is
+        // not judged by its length or its body).
         for i in 29..40 {
             l.clear(i);
         }
