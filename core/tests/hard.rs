@@ -370,21 +370,14 @@ fn probe_scan(scene: &str, w: u32) -> (Scanner, Rig, usize, u32) {
     (s, rig, cam, h)
 }
 
-/// Debug aid: where the points beyond 5 mm lie (frame, row, point, distance) after the mesher's
-/// rejection of contradicted points (`RAW=1`: before it). `SCENE`, `W`, `RGB`, `CAM`, `SPEED`.
-#[test]
-#[ignore]
-fn probe_outliers() {
-    let (s, rig, cam, h) = probe_scan("pyramid", 320);
-    let poses = poses_of(&s);
-    let tri = Triangulator::new(
-        rig.cameras[cam].geometry().unwrap(),
-        &TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() },
-    )
-    .unwrap();
+/// A probe's scan through the default detector and the triangulator (`tri_cfg`): camera
+/// `cam`'s grid of points and each frame's line.
+fn probe_lines(s: &Scanner, rig: &Rig, cam: usize, tri_cfg: &TriangulatorConfig) -> (Grid, Vec<LaserLine>) {
+    let poses = poses_of(s);
+    let tri = Triangulator::new(rig.cameras[cam].geometry().unwrap(), tri_cfg).unwrap();
     let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
     let (mut line, mut prof) = (LaserLine::default(), Profile::default());
-    let mut grid = Grid::new(h as usize);
+    let mut grid = Grid::new(rig.cameras[cam].height as usize);
     let mut lines = Vec::new();
     for f in 0..s.frame_count() {
         let ft = s.frame_time(f);
@@ -393,6 +386,17 @@ fn probe_outliers() {
         grid.push(ft.stamp_ns, &prof).unwrap();
         lines.push(line.clone());
     }
+    (grid, lines)
+}
+
+/// Debug aid: where the points beyond 5 mm lie (frame, row, point, distance) after the mesher's
+/// rejection of contradicted points (`RAW=1`: before it). `SCENE`, `W`, `RGB`, `CAM`, `SPEED`.
+#[test]
+#[ignore]
+fn probe_outliers() {
+    let (s, rig, cam, h) = probe_scan("pyramid", 320);
+    let tri_cfg = TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() };
+    let (mut grid, lines) = probe_lines(&s, &rig, cam, &tri_cfg);
     // One sample: where the line was found, how wide and strong, and its point's distance to
     // the true surface.
     let sample = |grid: &Grid, f: usize, i: usize| {
@@ -614,23 +618,15 @@ fn probe_two_surfaces() {
 #[ignore]
 fn probe_uncovered() {
     let (s, rig, cam, h) = probe_scan("body", 320);
-    let poses = poses_of(&s);
     let geo = rig.cameras[cam].geometry().unwrap();
     let tri_cfg = TriangulatorConfig { laser_plane: rig.laser_plane, ..Default::default() };
-    let tri = Triangulator::new(geo.clone(), &tri_cfg).unwrap();
-    let mut det = EdgeDetector::new(EdgeConfig::default()).unwrap();
-    let (mut line, mut prof) = (LaserLine::default(), Profile::default());
-    let mut grid = Grid::new(h as usize);
-    let (mut lines, mut truth) = (Vec::new(), Vec::new());
-    for f in 0..s.frame_count() {
-        let ft = s.frame_time(f);
-        det.detect(&s.render(cam, f).view().unwrap(), &mut line).unwrap();
-        tri.triangulate(&line, &poses.at(ft.stamp_ns).unwrap(), &mut prof);
-        grid.push(ft.stamp_ns, &prof).unwrap();
-        lines.push(line.clone());
-        // What the camera observes, as the `report` counts it.
-        truth.extend(s.observable_points(cam, f, tri_cfg.min_ray_plane_angle_deg).into_iter().map(|p| (f as usize, p)));
-    }
+    let (mut grid, lines) = probe_lines(&s, &rig, cam, &tri_cfg);
+    // What the camera observes, as the `report` counts it.
+    let truth: Vec<(usize, Vec3)> = (0..s.frame_count())
+        .flat_map(|f| {
+            s.observable_points(cam, f, tri_cfg.min_ray_plane_angle_deg).into_iter().map(move |p| (f as usize, p))
+        })
+        .collect();
     let v3 = |p: &[f32; 3]| Vec3::new(p[0].into(), p[1].into(), p[2].into());
     let hash =
         |g: &Grid| xsurf_core::eval::PointHash::new(g.points().iter().filter(|p| p[0].is_finite()).map(v3), 0.003);

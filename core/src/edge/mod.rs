@@ -1946,6 +1946,21 @@ mod tests {
         out
     }
 
+    /// For each of the first `rows` rows of `out` with a line, its centre minus `centre(row)`.
+    fn row_errors(out: &LaserLine, rows: u32, centre: impl Fn(u32) -> f64) -> Vec<f64> {
+        (0..rows).filter_map(|y| Some(f64::from(out.u[y as usize]) - centre(y)).filter(|e| e.is_finite())).collect()
+    }
+
+    /// The line of `img` found by a detector that saw `before` first (the line's width in the
+    /// last frames, and the last frame's line).
+    fn detect_after(before: &Image, img: &Image, cfg: EdgeConfig) -> LaserLine {
+        let mut d = EdgeDetector::new(cfg).unwrap();
+        let mut out = LaserLine::default();
+        d.detect(&before.view().unwrap(), &mut out).unwrap();
+        d.detect(&img.view().unwrap(), &mut out).unwrap();
+        out
+    }
+
     #[test]
     fn constant_image_has_no_line() {
         let mut img = Image::new(64, 8, Encoding::Mono8);
@@ -2325,10 +2340,7 @@ mod tests {
         for m in SUBPIXEL_METHODS {
             let cfg = EdgeConfig { method: m, ..Default::default() };
             // A detector that saw the line's width in the frame before finds it in every row.
-            let mut d = EdgeDetector::new(cfg.clone()).unwrap();
-            let mut out = LaserLine::default();
-            d.detect(&plain.view().unwrap(), &mut out).unwrap();
-            d.detect(&both.view().unwrap(), &mut out).unwrap();
+            let out = detect_after(&plain, &both, cfg.clone());
             assert_eq!((rows(&out), out.found()), (100, 100), "{m:?}: {:?}", &out.u[..]);
             // A fresh one does not know the line's width: the highlight takes the rows.
             assert_eq!(rows(&detect(&both, cfg)), 0, "{m:?}");
@@ -2355,11 +2367,7 @@ mod tests {
         add_noise(&mut both, 1.0, 53);
         let rows = |out: &LaserLine| (0..60).filter(|&y| (out.u[y] - (150.0 + 0.05 * y as f32)).abs() < 0.5).count();
         for m in SUBPIXEL_METHODS {
-            let cfg = EdgeConfig { method: m, ..Default::default() };
-            let mut d = EdgeDetector::new(cfg.clone()).unwrap();
-            let mut out = LaserLine::default();
-            d.detect(&plain.view().unwrap(), &mut out).unwrap();
-            d.detect(&both.view().unwrap(), &mut out).unwrap();
+            let out = detect_after(&plain, &both, EdgeConfig { method: m, ..Default::default() });
             assert_eq!((rows(&out), out.found()), (60, 60), "{m:?}: {:?}", &out.u[..]);
         }
     }
@@ -2471,9 +2479,7 @@ mod tests {
             add_noise(&mut img, 2.0, 31);
             for m in SUBPIXEL_METHODS {
                 let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
-                let errs: Vec<f64> = (0..60u32)
-                    .filter_map(|y| Some(f64::from(out.u[y as usize]) - centre(y)).filter(|e| e.is_finite()))
-                    .collect();
+                let errs = row_errors(&out, 60, centre);
                 let what = format!("{m:?}, {offset} px from the stripe's middle");
                 assert!(errs.len() >= 57, "{what}: found in {} of 60 rows", errs.len());
                 let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
@@ -2512,9 +2518,7 @@ mod tests {
             add_noise(&mut img, 1.5, 41);
             for m in SUBPIXEL_METHODS {
                 let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
-                let errs: Vec<f64> = (0..60u32)
-                    .filter_map(|y| Some(f64::from(out.u[y as usize]) - centre(y)).filter(|e| e.is_finite()))
-                    .collect();
+                let errs = row_errors(&out, 60, centre);
                 let what = format!("{m:?}, {offset} px from the stripe's middle");
                 assert!(errs.len() >= 54, "{what}: found in {} of 60 rows", errs.len());
                 let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
