@@ -1076,15 +1076,14 @@ impl Writer {
       .readers
       .values()
       .all(|rp| last_change < rp.all_acked_before);
-    // xsurf patch (see XSURF-PATCH.md): a writer that holds no sample (it has
-    // written none yet) still says so to its readers (first > last) at the slow
-    // period. A reader learns from a HEARTBEAT where the writer's history
-    // starts; a volatile Cyclone DDS reader that first hears of it in a
-    // HEARTBEAT sent while the first sample is still on its way (a 44 MB
-    // Marker takes tens of milliseconds) counts that sample as history from
-    // before it matched, acknowledges it and never delivers it. The HEARTBEAT
-    // at the match alone does not do: it can reach the reader before the reader
-    // knows this writer.
+    // xsurf patch (see XSURF-PATCH.md): a writer that holds no sample (none
+    // written yet, or all evicted) still says so to its readers (first > last)
+    // at the slow period. A reader learns from a HEARTBEAT where the writer's
+    // history starts; a volatile Cyclone DDS reader that first hears of it in
+    // the HEARTBEAT behind a large first sample, some of whose datagrams it
+    // dropped, counts that sample as history from before it matched,
+    // acknowledges it and never delivers it. The HEARTBEAT at the match alone
+    // does not do: it can reach the reader before the reader knows this writer.
     let holds_nothing = last_change < first_change && !self.readers.is_empty();
     if all_acked && !holds_nothing {
       trace!("heartbeat tick: all readers have all available data.");
