@@ -889,8 +889,8 @@ pub struct EdgeDetector {
     sigma_px: Option<f32>,
     /// The line's typical width (median FWHM, pixels) in the last frame that had a line.
     width_px: Option<f32>,
-    /// Scratch for widths' medians (the frame's, each run's).
-    widths: Vec<f32>,
+    /// Scratch for the medians of widths and strengths (the frame's, each run's), as order keys.
+    widths: Vec<u32>,
     /// The frame's signal as bytes, where it is not read in place.
     plane: Plane,
     /// Per sample of the second line: saturated, and a narrow line's fit.
