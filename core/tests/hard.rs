@@ -313,22 +313,19 @@ fn second_surfaces_keep_the_floor_and_add_to_the_coverage() {
 }
 
 #[test]
-fn body_320x240_mono8_takes_no_highlight_for_the_line() {
+fn body_320x240_mono8_meets_the_floor_but_the_hair_with_second_surfaces() {
+    // With the second surfaces' line (`second_surfaces`, where the body hides part of the
+    // table) the floor is met but for the hair: coverage 95.40 / 95.07 % (95.25 / 94.92 before a
+    // lone extrapolation needed the other direction's midpoint to disagree; 95.17 / 94.89 before
+    // a run was judged by its median width), RMS 0.643 / 0.674 mm, 0.021 / 0.021 % beyond 5 mm.
+    // With the first line alone (the report): coverage 94.96 / 94.62 %. The hair: 37.6 / 1.8 %;
+    // most of cam2's hair line lies under a signal-to-noise ratio of 16 (`probe_dark_misses`).
     // The scan opens with laser-off frames: a glossy highlight on the body (about 12 px wide,
     // 25 rows) came before any frame had shown the line's width, and was placed 28 cm off the
-    // body (42 points, RMS 5.1 mm). Below the floor: coverage 94.81 / 94.47 % (94.15 / 93.98
-    // before a point between its grid neighbours was kept, and a row's candidate four times
-    // wider than the line tried last; 94.73 / 94.44 before a run was judged by its median
-    // width); the hair 30.2 / 1.8 %: most of cam2's hair line lies under a signal-to-noise
-    // ratio of 16 (`probe_dark_misses`). Beyond 5 mm 0.009 / 0.007 % (cam2 0.12 % before a
-    // bright face beside the line was told from it).
-    for c in scan("body", (320, 240), Encoding::Mono8, 0.140, Method::CenterOfGravity) {
-        assert_eq!(c.laser_off_points, 0, "{}: points in laser-off frames", c.name);
-        assert!(c.rms_m <= Bounds::FLOOR_320.rms_m, "{}: rms {:.3} mm", c.name, c.rms_m * 1e3);
-        assert!(c.beyond_5mm <= Bounds::FLOOR_320.beyond_5mm, "{}: {:.3} % beyond 5 mm", c.name, c.beyond_5mm * 100.0);
-        assert!(c.table_median_m.abs() <= 0.0001, "{}: table median {:+.3} mm", c.name, c.table_median_m * 1e3);
-        assert!(c.coverage >= 0.94 && c.mesh_over_points >= 0.95, "{c:?}");
-    }
+    // body (42 points, RMS 5.1 mm); cam2 had 0.12 % beyond 5 mm before a bright face beside the
+    // line was told from it.
+    let b = Bounds { dark_band: 0.0, ..Bounds::FLOOR_320 };
+    check(&scan_with("body", (320, 240), Encoding::Mono8, 0.140, Method::CenterOfGravity, true), b);
 }
 
 #[test]
