@@ -399,9 +399,9 @@ impl Verdict {
     /// Whether this direction rejects the point, `other` being the other direction's verdict.
     /// A lone extrapolation from one side doubles its neighbour's error and overshoots on a
     /// curved surface; where the other direction's neighbours on both sides place the point,
-    /// it is not enough to reject it. (The hard body at 320x240 and 140 mm/s: of the points
-    /// the rule rejected, 365 of cam2's lay under 1 mm from the surface, most of them so, in
-    /// the first or last frame on a surface or at a run's end.)
+    /// it is not enough to reject it. (The hard body at 320x240 in grey with its second
+    /// surfaces' line: of cam2's points the rule rejected, 390 lay under 1 mm from the surface,
+    /// most of them in the first or last frame on a surface or at a run's end.)
     fn rejects_against(&self, other: &Verdict) -> bool {
         self.contradicted && !(self.lone && other.centred)
     }
@@ -411,7 +411,8 @@ impl Verdict {
 /// midpoint places, and the point still be kept. Farther, the point is off its surface: with
 /// 1.5 the hard phantom at 320x240 in grey, with its second surfaces' line, kept two more points
 /// beyond 5 mm (cam2 0.096 -> 0.103 %, over the floor); with 1.3 none, and the hard body at
-/// 320x240 in grey keeps 144 / 175 more of its points (coverage +0.15 / +0.15 points).
+/// 320x240 in grey with its second line keeps 144 / 175 more of its points (coverage +0.15 /
+/// +0.15 points).
 const LONE_MISS: f32 = 1.3;
 
 /// What [`Grid::clean`] did.

@@ -315,9 +315,10 @@ fn second_surfaces_keep_the_floor_and_add_to_the_coverage() {
 #[test]
 fn body_320x240_mono8_meets_the_floor_but_the_hair_with_second_surfaces() {
     // With the second surfaces' line (`second_surfaces`, where the body hides part of the
-    // table) the floor is met but for the hair: coverage 95.40 / 95.07 % (95.25 / 94.92 before a
-    // lone extrapolation needed the other direction's midpoint to disagree; 95.17 / 94.89 before
-    // a run was judged by its median width), RMS 0.643 / 0.674 mm, 0.021 / 0.021 % beyond 5 mm.
+    // table) the floor is met but for the hair: coverage 95.40 / 95.07 % (95.25 / 94.92 while a
+    // lone one-sided extrapolation rejected a point that the other direction's midpoint placed;
+    // 95.17 / 94.89 before a run was judged by its median width), RMS 0.643 / 0.674 mm, 0.021 /
+    // 0.021 % beyond 5 mm.
     // With the first line alone (the report): coverage 94.96 / 94.62 %. The hair: 37.6 / 1.8 %;
     // most of cam2's hair line lies under a signal-to-noise ratio of 16 (`probe_dark_misses`).
     // The scan opens with laser-off frames: a glossy highlight on the body (about 12 px wide,

@@ -267,25 +267,22 @@ fn off_course(line: &LaserLine, r: &Run, s: u32, span: u32, eligible: impl Fn(us
 
 /// The median width of run `r`'s samples that have one (0 where none has).
 fn median_width(line: &LaserLine, r: &Run, scratch: &mut Vec<u32>) -> f32 {
-    scratch.clear();
-    scratch.extend((r.first..=r.last).map(|s| line.width[s as usize]).filter(|w| *w > 0.0).map(order_key));
-    if scratch.is_empty() {
-        return 0.0;
-    }
-    let mid = scratch.len() / 2;
-    select(scratch, mid)
+    median(scratch, (r.first..=r.last).map(|s| line.width[s as usize]).filter(|w| *w > 0.0)).unwrap_or(0.0)
 }
 
-/// The median strength of run `r`'s samples.
+/// The median strength of run `r`'s samples (0 where none is found).
 fn median_strength(line: &LaserLine, r: &Run, scratch: &mut Vec<u32>) -> f32 {
+    let found = (r.first..=r.last).filter(|&s| line.across(s as usize).is_finite());
+    median(scratch, found.map(|s| line.strength[s as usize])).unwrap_or(0.0)
+}
+
+/// The median (the upper one of an even count) of `values`, `None` where there are none;
+/// `scratch` holds their keys.
+fn median(scratch: &mut Vec<u32>, values: impl Iterator<Item = f32>) -> Option<f32> {
     scratch.clear();
-    scratch.extend(
-        (r.first..=r.last)
-            .filter(|&s| line.across(s as usize).is_finite())
-            .map(|s| order_key(line.strength[s as usize])),
-    );
+    scratch.extend(values.map(order_key));
     let mid = scratch.len() / 2;
-    select(scratch, mid)
+    (!scratch.is_empty()).then(|| select(scratch, mid))
 }
 
 /// A key whose unsigned order is `f32::total_cmp`'s order of `x`: selecting on integers is
@@ -319,13 +316,8 @@ const WIDE_RUN_TOLERANCE: f32 = 2.0;
 /// The typical width of the line in `line` (the median of its samples' widths), if it has at
 /// least `min` samples.
 pub(super) fn typical_width(line: &LaserLine, min: usize, scratch: &mut Vec<u32>) -> Option<f32> {
-    scratch.clear();
-    scratch.extend(line.width.iter().copied().filter(|w| *w > 0.0).map(order_key));
-    if scratch.len() < min {
-        return None;
-    }
-    let mid = scratch.len() / 2;
-    Some(select(scratch, mid))
+    let widths = line.width.iter().copied().filter(|w| *w > 0.0);
+    median(scratch, widths).filter(|_| scratch.len() >= min)
 }
 
 /// Runs shorter than this many times `min_run` are judged by their length as well.
