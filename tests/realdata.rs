@@ -145,8 +145,13 @@ fn ciclop_laser_off_frames_give_no_samples() {
         for method in [Method::Gaussian, Method::CenterOfGravity, Method::Parabolic] {
             let line = detect(&img, ciclop_camera(method));
             eprintln!("{name}, {method:?}: {} samples", line.found());
-            if method == Method::Gaussian {
-                assert_eq!(line.found(), 0, "{name}: samples in a frame without laser light");
+            // `texture.png` is the scene under white light for its colours: bright features
+            // 10-20 px wide, within this camera's `max_width_px` (24) in the red channel, where
+            // the centre of gravity and the parabola still find 20-25 rows (BENCHMARKS.md). The
+            // laser-off photographs give none by any method (the pattern's photographs gave
+            // 22-25 by those two before a line's light had to fall away on both sides).
+            if method == Method::Gaussian || name != "texture.png" {
+                assert_eq!(line.found(), 0, "{name}, {method:?}: samples in a frame without laser light");
             }
         }
     }

@@ -834,6 +834,16 @@ fn judge<S: Sample>(
             _ => cog(p).ok_or(run)?,
         }
     } else {
+        // A line's light falls away on both sides: above `peak_fraction` of its height, the
+        // logarithm of a line that is neither clipped nor on a shoulder is concave (the
+        // log-parabola of `gaussian_fit`, which the Gaussian method starts from). A halo on the
+        // edge of crushed black stands over both flanks but stays up on its bright side: the
+        // Ciclop's laser-off photographs of its pattern gave 22-25 rows by the centre of
+        // gravity without this test, none by the Gaussian method.
+        let falls_away = |p: &[S]| saturated || stepped || gaussian_fit(p, m, bg, strength, cfg).is_some();
+        if cfg.method != Method::Gaussian && !falls_away(p) {
+            return Err(run);
+        }
         match cfg.method {
             Method::Parabolic if !saturated => {
                 let (a, b, c) = (p[m - 1].f(), peak, p[m + 1].f());
@@ -2266,6 +2276,29 @@ mod tests {
             for m in SUBPIXEL_METHODS {
                 let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
                 assert_eq!(out.found(), 0, "{name}, {m:?}: {:?}", &out.u[..5]);
+            }
+        }
+    }
+
+    #[test]
+    fn a_halo_on_the_edge_of_crushed_black_is_not_a_line() {
+        // The Ciclop's laser-off photographs of its pattern at high contrast: the black squares
+        // crushed to 0, and on their edges against the grey (50) a sharpening halo 30-34 levels
+        // over the grey, 4-8 px wide at half its height over the mean of the two sides. It
+        // stands over both flanks (a third as much over the grey as over the black), so the
+        // step test passes it; its light does not fall away on the grey side as a line's does
+        // (no concave log-profile: `gaussian_fit`). Without that test the centre of gravity and
+        // the parabola took it for a line in 36-40 of the 40 rows.
+        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.5).exp());
+        for (rim, sigma) in [(30.0, 1.4), (34.0, 1.4), (30.0, 1.6), (34.0, 1.8), (30.0, 2.2)] {
+            let mut img = image_from(120, 40, |_, a, _| {
+                let x = a + 0.5 - 60.3;
+                50.0 * smooth(x) + rim * (-(x - 1.0).powi(2) / (2.0 * sigma * sigma)).exp() * smooth(x)
+            });
+            add_noise(&mut img, 1.5, 5);
+            for m in SUBPIXEL_METHODS {
+                let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+                assert_eq!(out.found(), 0, "halo {rim} levels, sigma {sigma} px, {m:?}: {:?}", &out.u[..3]);
             }
         }
     }

@@ -40,6 +40,52 @@ pub(super) fn runs(line: &LaserLine, range: Range<u32>, max_jump_px: f32) -> Vec
     out
 }
 
+/// Clears every lone sample off the line's course on both sides where the found samples just
+/// before and after it (at most `MAX_GAP` missing between those two) lie within `max_jump_px`
+/// of each other: a peak of another surface or of texture in a row where the line itself was
+/// not found, with the line running on smoothly across it. Such a sample, a run of one, is
+/// dropped with the short runs anyway; cleared first, it no longer cuts the line's run in two
+/// (on the robot's real frames a piece of six samples so cut off was dropped as a blob). The
+/// two neighbours must agree within one step's tolerance, not the runs' own `max_jump_px` a
+/// step: with that, the tail of the sheet on another surface (6 px aside over two rows) joined
+/// a run of the hard phantom at 640x480 and its points 11 mm off were kept. Nor may either
+/// neighbour be a faint tail (under half the strongest sample near it): the hard body's table
+/// line at 640x480 so took on samples of a twentieth of its strength, 5-6 mm off. Returns how
+/// many were cleared.
+fn drop_strays(line: &mut LaserLine, range: Range<u32>, max_jump_px: f32) -> u32 {
+    let follows = |(a, xa): (u32, f32), (b, xb): (u32, f32)| {
+        b - a <= MAX_GAP + 1 && (xb - xa).abs() <= max_jump_px * (b - a) as f32
+    };
+    // The last two found samples (index, position across) before the one at hand.
+    let (mut before, mut lone) = (None::<(u32, f32)>, None::<(u32, f32)>);
+    let last = (line.len() as u32).saturating_sub(1);
+    let mut dropped = 0;
+    for s in range {
+        let x = line.across(s as usize);
+        if !x.is_finite() {
+            continue;
+        }
+        let after = (s, x);
+        if let (Some(b), Some(c)) = (before, lone) {
+            let smooth = after.0 - b.0 <= MAX_GAP + 1 && (after.1 - b.1).abs() <= max_jump_px;
+            // Neither neighbour a faint tail: each at least half as strong as the strongest
+            // sample near them (the stray aside).
+            let strength = |s: u32| line.strength[s as usize];
+            let near = b.0.saturating_sub(COURSE_SPAN)..=(after.0 + COURSE_SPAN).min(last);
+            let strongest = near.filter(|&s| s != c.0).map(strength).fold(0.0, f32::max);
+            let firm = strength(b.0).min(strength(after.0)) >= SLIVER_STRENGTH * strongest;
+            if smooth && firm && !follows(b, c) && !follows(c, after) {
+                line.clear(c.0 as usize);
+                dropped += 1;
+                lone = Some(after);
+                continue;
+            }
+        }
+        (before, lone) = (lone, Some(after));
+    }
+    dropped
+}
+
 /// Extends every run of at least `min_run` samples, longest first, beyond its ends: the next
 /// sample's position is extrapolated from the run's last samples, and `probe(line, s, (centre,
 /// radius))` searches sample `s` near it, writing what it finds (and leaving the sample as it
@@ -370,7 +416,7 @@ pub(super) fn drop_short_runs(
     typical_width_px: Option<f32>,
     scratch: &mut Vec<u32>,
 ) -> u32 {
-    let mut dropped = 0;
+    let mut dropped = drop_strays(line, range.clone(), cfg.max_jump_px);
     for r in runs(line, range.clone(), cfg.max_jump_px) {
         let mean_width: f32 = (r.first..=r.last).map(|s| line.width[s as usize]).sum::<f32>() / r.count as f32;
         // The faded body and the typical width are judged by the median width: a highlight
@@ -476,6 +522,46 @@ mod tests {
             *u += shift;
         }
         l
+    }
+
+    #[test]
+    fn a_lone_stray_does_not_cut_the_line_into_runs_too_short_to_keep() {
+        // The robot's real frame 62 (columns 572-579): a line 6 px wide whose rows 25 and 32
+        // hold a peak of the floor 50 px off. Read as runs, the six rows between them are a
+        // piece shorter than twice its width, a blob, and were dropped with the strays.
+        let cfg = EdgeConfig::default();
+        let mut scratch = Vec::new();
+        let mut l = line(&[6.0; 60]);
+        l.u[25] += 50.0;
+        l.u[32] += 50.0;
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 2);
+        assert!(!l.u[25].is_finite() && !l.u[32].is_finite());
+        assert_eq!(l.found(), 58);
+        // Where the line steps to another surface, the sample between the two is no stray: its
+        // neighbours do not continue each other. It is dropped as a run of one, the two
+        // surfaces' runs are kept whole.
+        let mut l = line(&[6.0; 60]);
+        for u in &mut l.u[30..] {
+            *u += 50.0;
+        }
+        l.u[29] += 25.0;
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch), 1);
+        assert!(!l.u[29].is_finite());
+        assert_eq!(l.found(), 59);
+        // The hard body's table line at 640x480: where it ends, two faint samples (a twentieth
+        // of its strength, 2 px aside) around a stray. They are no line to join across it: the
+        // stray and the faint sample beyond it go as runs of one.
+        let mut l = line(&[3.0; 30]);
+        for s in 27..30 {
+            l.clear(s);
+        }
+        for s in [24, 26] {
+            l.u[s] -= 2.0;
+            l.strength[s] = 8.0;
+        }
+        l.u[25] += 150.0;
+        assert_eq!(drop_short_runs(&mut l, &cfg, 0..30, None, &mut scratch), 2);
+        assert!(!l.u[25].is_finite() && !l.u[26].is_finite());
     }
 
     #[test]
