@@ -2508,17 +2508,9 @@ mod tests {
         // (9) 14 px wide between two surfaces under room light (45), and on the print it is
         // dimmer than they are (25 grey levels over the print). Anywhere at least 4.5 px from
         // either edge (nearer: `dim_line_three_pixels_from_a_dark_stripes_edge_is_found`).
-        let top = box_line(-0.5, 0.5, 0.0, 1.8);
-        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
         for offset in [-2.5, -1.0, 0.0, 1.5, 2.5] {
-            let stripe = |y: u32| 60.0 + 0.05 * f64::from(y);
-            let centre = |y: u32| stripe(y) + offset;
-            let mut img = image_from(120, 60, |y, a, b| {
-                let x = a + 0.5 - stripe(y);
-                let bright = smooth(x - 7.0) + smooth(-x - 7.0);
-                9.0 + 36.0 * bright + 25.0 * box_line(a, b, centre(y), 1.8) / top
-            });
-            add_noise(&mut img, 2.0, 31);
+            let centre = |y: u32| print_stripe_middle(y) + offset;
+            let img = print_stripe(Some(offset), 31);
             for m in SUBPIXEL_METHODS {
                 let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
                 let errs = row_errors(&out, 60, centre);
@@ -2529,14 +2521,31 @@ mod tests {
             }
         }
         // The stripe alone, without the line, gives nothing.
-        let mut img = image_from(120, 60, |y, a, _| {
-            let x = a + 0.5 - (60.0 + 0.05 * f64::from(y));
-            9.0 + 36.0 * (smooth(x - 7.0) + smooth(-x - 7.0))
-        });
-        add_noise(&mut img, 2.0, 37);
+        let img = print_stripe(None, 37);
         for m in SUBPIXEL_METHODS {
             assert_eq!(detect(&img, EdgeConfig { method: m, ..Default::default() }).found(), 0, "{m:?}");
         }
+    }
+
+    /// The middle of `print_stripe`'s stripe in row `y`.
+    fn print_stripe_middle(y: u32) -> f64 {
+        60.0 + 0.05 * f64::from(y)
+    }
+
+    /// The hard pyramid's dark print at 320x240 in grey, 60 rows: a stripe of print (9) 14 px
+    /// wide between two surfaces under room light (45), and with `offset` a line 25 grey levels
+    /// over the print, 1.8 px wide, that many pixels from the stripe's middle; noise of 2
+    /// levels (`seed`).
+    fn print_stripe(offset: Option<f64>, seed: u64) -> Image {
+        let top = box_line(-0.5, 0.5, 0.0, 1.8);
+        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
+        let mut img = image_from(120, 60, |y, a, b| {
+            let x = a + 0.5 - print_stripe_middle(y);
+            let line = offset.map_or(0.0, |o| 25.0 * box_line(a, b, print_stripe_middle(y) + o, 1.8) / top);
+            9.0 + 36.0 * (smooth(x - 7.0) + smooth(-x - 7.0)) + line
+        });
+        add_noise(&mut img, 2.0, seed);
+        img
     }
 
     #[test]
@@ -2547,17 +2556,9 @@ mod tests {
         // surface's ramp. That sample and the line's own last sample, already dark, are then
         // its flank (`dark_flanks`). At 4 px the surface's ramp reaches the line in about half
         // the rows.
-        let top = box_line(-0.5, 0.5, 0.0, 1.8);
-        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
         for offset in [-4.0, -3.5, 3.5, 4.0] {
-            let stripe = |y: u32| 60.0 + 0.05 * f64::from(y);
-            let centre = |y: u32| stripe(y) + offset;
-            let mut img = image_from(120, 60, |y, a, b| {
-                let x = a + 0.5 - stripe(y);
-                let bright = smooth(x - 7.0) + smooth(-x - 7.0);
-                9.0 + 36.0 * bright + 25.0 * box_line(a, b, centre(y), 1.8) / top
-            });
-            add_noise(&mut img, 2.0, 47);
+            let centre = |y: u32| print_stripe_middle(y) + offset;
+            let img = print_stripe(Some(offset), 47);
             for m in SUBPIXEL_METHODS {
                 let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
                 let errs = row_errors(&out, 60, centre);
