@@ -53,37 +53,51 @@ pub(super) fn runs(line: &LaserLine, range: Range<u32>, max_jump_px: f32) -> Vec
 /// line at 640x480 so took on samples of a twentieth of its strength, 5-6 mm off. Returns how
 /// many were cleared.
 fn drop_strays(line: &mut LaserLine, range: Range<u32>, max_jump_px: f32) -> u32 {
+    let strays = strays(line, range, max_jump_px);
+    for &s in &strays {
+        line.clear(s as usize);
+    }
+    strays.len() as u32
+}
+
+/// The samples [`drop_strays`] clears (read in one pass: a cleared sample is never read again).
+fn strays(line: &LaserLine, range: Range<u32>, max_jump_px: f32) -> Vec<u32> {
+    let across = match line.orientation {
+        super::Orientation::Vertical => &line.u,
+        super::Orientation::Horizontal => &line.v,
+    };
     let follows = |(a, xa): (u32, f32), (b, xb): (u32, f32)| {
         b - a <= MAX_GAP + 1 && (xb - xa).abs() <= max_jump_px * (b - a) as f32
     };
+    let strength = |s: u32| line.strength[s as usize];
+    let last = (across.len() as u32).saturating_sub(1);
     // The last two found samples (index, position across) before the one at hand.
     let (mut before, mut lone) = (None::<(u32, f32)>, None::<(u32, f32)>);
-    let last = (line.len() as u32).saturating_sub(1);
-    let mut dropped = 0;
+    let mut out = Vec::new();
     for s in range {
-        let x = line.across(s as usize);
+        let x = across[s as usize];
         if !x.is_finite() {
             continue;
         }
         let after = (s, x);
         if let (Some(b), Some(c)) = (before, lone) {
-            let smooth = after.0 - b.0 <= MAX_GAP + 1 && (after.1 - b.1).abs() <= max_jump_px;
+            let smooth = || after.0 - b.0 <= MAX_GAP + 1 && (after.1 - b.1).abs() <= max_jump_px;
             // Neither neighbour a faint tail: each at least half as strong as the strongest
             // sample near them (the stray aside).
-            let strength = |s: u32| line.strength[s as usize];
-            let near = b.0.saturating_sub(COURSE_SPAN)..=(after.0 + COURSE_SPAN).min(last);
-            let strongest = near.filter(|&s| s != c.0).map(strength).fold(0.0, f32::max);
-            let firm = strength(b.0).min(strength(after.0)) >= SLIVER_STRENGTH * strongest;
-            if smooth && firm && !follows(b, c) && !follows(c, after) {
-                line.clear(c.0 as usize);
-                dropped += 1;
+            let firm = || {
+                let near = b.0.saturating_sub(COURSE_SPAN)..=(after.0 + COURSE_SPAN).min(last);
+                let strongest = near.filter(|&s| s != c.0).map(strength).fold(0.0, f32::max);
+                strength(b.0).min(strength(after.0)) >= SLIVER_STRENGTH * strongest
+            };
+            if !follows(b, c) && !follows(c, after) && smooth() && firm() {
+                out.push(c.0);
                 lone = Some(after);
                 continue;
             }
         }
         (before, lone) = (lone, Some(after));
     }
-    dropped
+    out
 }
 
 /// Extends every run of at least `min_run` samples, longest first, beyond its ends: the next
@@ -416,8 +430,13 @@ pub(super) fn drop_short_runs(
     typical_width_px: Option<f32>,
     scratch: &mut Vec<u32>,
 ) -> u32 {
-    let mut dropped = drop_strays(line, range.clone(), cfg.max_jump_px);
-    for r in runs(line, range.clone(), cfg.max_jump_px) {
+    // A stray parts the runs in three at least (the line's before it, itself, the line's after).
+    let mut list = runs(line, range.clone(), cfg.max_jump_px);
+    let mut dropped = if list.len() >= 3 { drop_strays(line, range.clone(), cfg.max_jump_px) } else { 0 };
+    if dropped > 0 {
+        list = runs(line, range.clone(), cfg.max_jump_px);
+    }
+    for r in list {
         let mean_width: f32 = (r.first..=r.last).map(|s| line.width[s as usize]).sum::<f32>() / r.count as f32;
         // The faded body and the typical width are judged by the median width: a highlight
         // that crosses a dim line widens a few of its rows, and by their mean the whole run
