@@ -708,8 +708,9 @@ fn dark_flanks<S: Sample>(p: &[S], (lo, hi): (usize, usize), flank: usize, level
     while start > 0 && end - start < flank && p[start - 1].f() < level {
         start -= 1;
     }
-    let mut rstart = hi + 2;
-    let mut rend = rstart.min(p.len());
+    // At the profile's end the right flank is empty (never `rend < rstart`).
+    let mut rstart = (hi + 2).min(p.len());
+    let mut rend = rstart;
     while rend < p.len() && rend - rstart < flank && p[rend].f() < level {
         rend += 1;
     }
