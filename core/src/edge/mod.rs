@@ -837,14 +837,12 @@ fn judge<S: Sample>(
     } else {
         // A line's light falls away on both sides: above `peak_fraction` of its height, the
         // logarithm of a line that is neither clipped nor on a shoulder is concave (the
-        // log-parabola of `gaussian_fit`, which the Gaussian method starts from). A halo on the
-        // edge of crushed black stands over both flanks but stays up on its bright side: the
-        // Ciclop's laser-off photographs of its pattern gave 22-25 rows by the centre of
-        // gravity without this test, none by the Gaussian method.
-        let falls_away = |p: &[S]| saturated || stepped || gaussian_fit(p, m, bg, strength, cfg).is_some();
-        if cfg.method != Method::Gaussian && !falls_away(p) {
-            return Err(run);
-        }
+        // log-parabola of `gaussian_fit`, which also starts the Gaussian method's fit). A halo
+        // on the edge of crushed black stands over both flanks but stays up on its bright side:
+        // the Ciclop's laser-off photographs of its pattern gave 22-25 rows by the centre of
+        // gravity before every method asked this.
+        let log_parabola =
+            if saturated || stepped { None } else { Some(gaussian_fit(p, m, bg, strength, cfg).ok_or(run)?) };
         match cfg.method {
             Method::Parabolic if !saturated => {
                 let (a, b, c) = (p[m - 1].f(), peak, p[m + 1].f());
@@ -852,9 +850,9 @@ fn judge<S: Sample>(
                 Some(if den < 0.0 { m as f32 + (0.5 * (a - c) / den).clamp(-0.5, 0.5) } else { m as f32 })
             }
             Method::Gaussian => {
-                // The log-parabola (or, on a clipped top, the centre of gravity) starts a
-                // least-squares fit of the Gaussian itself, saturated samples censored.
-                let start = if saturated || stepped { cog(p) } else { gaussian_fit(p, m, bg, strength, cfg) };
+                // The log-parabola (or, on a clipped top or a shoulder, the centre of gravity)
+                // starts a least-squares fit of the Gaussian itself, saturated samples censored.
+                let start = log_parabola.or_else(|| cog(p));
                 let reach = ((0.8 * width).ceil() as usize).max(4).min(2 * max_hw);
                 let (a, b) = (m.saturating_sub(reach), (m + reach).min(n - 1));
                 start.and_then(|c| {
@@ -1972,6 +1970,11 @@ mod tests {
         (0..rows).filter_map(|y| Some(f64::from(out.u[y as usize]) - centre(y)).filter(|e| e.is_finite())).collect()
     }
 
+    /// The root mean square of `errs`.
+    fn rms(errs: &[f64]) -> f64 {
+        (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt()
+    }
+
     /// The line of `img` found by a detector that saw `before` first (the line's width in the
     /// last frames, and the last frame's line).
     fn detect_after(before: &Image, img: &Image, cfg: EdgeConfig) -> LaserLine {
@@ -2150,7 +2153,7 @@ mod tests {
                     .collect();
                 let what = format!("{m:?}, {}, {}", if rgb { "rgb8" } else { "bgr8" }, line_orientation.name());
                 assert_eq!(errs.len(), n as usize, "{what}: every sample found");
-                let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+                let rms = rms(&errs);
                 let bias = errs.iter().sum::<f64>() / errs.len() as f64;
                 // The vertical line placed on red minus the others: rms 0.031-0.035 px (centre
                 // of gravity) and 0.049-0.053 px (Gaussian); on the red channel 0.027-0.030 and
@@ -2463,7 +2466,7 @@ mod tests {
                 .filter_map(|y| Some(f64::from(out.u[y as usize]) - centre(y)).filter(|e| e.is_finite()))
                 .collect();
             assert!(errs.len() >= 190, "{m:?}: found in {} of 200 rows", errs.len());
-            let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+            let rms = rms(&errs);
             assert!(rms < 0.3, "{m:?}: rms {rms} px");
         }
         // Noise alone at the same level gives nothing.
@@ -2496,7 +2499,7 @@ mod tests {
                         .collect();
                     let what = format!("{m:?}, edge {gap} px to the {}", if mirror { "right" } else { "left" });
                     assert!(errs.len() >= 57, "{what}: found in {} of 60 rows", errs.len());
-                    let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+                    let rms = rms(&errs);
                     assert!(rms < 0.25, "{what}: rms {rms:.3} px");
                 }
             }
@@ -2510,14 +2513,10 @@ mod tests {
         // dimmer than they are (25 grey levels over the print). Anywhere at least 4.5 px from
         // either edge (nearer: `dim_line_three_pixels_from_a_dark_stripes_edge_is_found`).
         for offset in [-2.5, -1.0, 0.0, 1.5, 2.5] {
-            let centre = |y: u32| print_stripe_middle(y) + offset;
-            let img = print_stripe(Some(offset), 31);
-            for m in SUBPIXEL_METHODS {
-                let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
-                let errs = row_errors(&out, 60, centre);
+            for (m, errs) in print_stripe_errors(offset, 31) {
                 let what = format!("{m:?}, {offset} px from the stripe's middle");
                 assert!(errs.len() >= 57, "{what}: found in {} of 60 rows", errs.len());
-                let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+                let rms = rms(&errs);
                 assert!(rms < 0.25, "{what}: rms {rms:.3} px");
             }
         }
@@ -2549,6 +2548,16 @@ mod tests {
         img
     }
 
+    /// Each method's row errors on `print_stripe` with its line `offset` px from the middle.
+    fn print_stripe_errors(offset: f64, seed: u64) -> Vec<(Method, Vec<f64>)> {
+        let img = print_stripe(Some(offset), seed);
+        let centre = |y: u32| print_stripe_middle(y) + offset;
+        SUBPIXEL_METHODS
+            .iter()
+            .map(|&m| (m, row_errors(&detect(&img, EdgeConfig { method: m, ..Default::default() }), 60, centre)))
+            .collect()
+    }
+
     #[test]
     fn dim_line_three_pixels_from_a_dark_stripes_edge_is_found() {
         // The hard pyramid's print at 320x240 in grey, in the frames where the sheet nears the
@@ -2558,16 +2567,12 @@ mod tests {
         // its flank (`dark_flanks`). At 4 px the surface's ramp reaches the line in about half
         // the rows.
         for offset in [-4.0, -3.5, 3.5, 4.0] {
-            let centre = |y: u32| print_stripe_middle(y) + offset;
-            let img = print_stripe(Some(offset), 47);
-            for m in SUBPIXEL_METHODS {
-                let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
-                let errs = row_errors(&out, 60, centre);
+            for (m, errs) in print_stripe_errors(offset, 47) {
                 let what = format!("{m:?}, {offset} px from the stripe's middle");
                 // Without the line's own dark sample in the flank: 0-23 rows.
                 let least = if offset.abs() < 3.8 { 50 } else { 30 };
                 assert!(errs.len() >= least, "{what}: found in {} of 60 rows", errs.len());
-                let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+                let rms = rms(&errs);
                 assert!(rms < 0.2, "{what}: rms {rms:.3} px");
             }
         }
@@ -2597,7 +2602,7 @@ mod tests {
                 let errs = row_errors(&out, 60, centre);
                 let what = format!("{m:?}, {offset} px from the stripe's middle");
                 assert!(errs.len() >= 54, "{what}: found in {} of 60 rows", errs.len());
-                let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+                let rms = rms(&errs);
                 assert!(rms < 0.3, "{what}: rms {rms:.3} px");
             }
         }

@@ -29,7 +29,7 @@ pub(super) fn runs(line: &LaserLine, range: Range<u32>, max_jump_px: f32) -> Vec
             continue;
         }
         match (last, out.last_mut()) {
-            (Some((ls, lx)), Some(run)) if s - ls <= MAX_GAP + 1 && (x - lx).abs() <= max_jump_px * (s - ls) as f32 => {
+            (Some(l), Some(run)) if continues(l, (s, x), max_jump_px) => {
                 run.last = s;
                 run.count += 1;
             }
@@ -38,6 +38,12 @@ pub(super) fn runs(line: &LaserLine, range: Range<u32>, max_jump_px: f32) -> Vec
         last = Some((s, x));
     }
     out
+}
+
+/// Whether sample `b` (index, position across) continues the run whose last sample is `a`: at
+/// most `MAX_GAP` missing between them, and at most `max_jump_px` a step apart.
+fn continues((a, xa): (u32, f32), (b, xb): (u32, f32), max_jump_px: f32) -> bool {
+    b - a <= MAX_GAP + 1 && (xb - xa).abs() <= max_jump_px * (b - a) as f32
 }
 
 /// Clears every lone sample off the line's course on both sides where the found samples just
@@ -66,9 +72,7 @@ fn strays(line: &LaserLine, range: Range<u32>, max_jump_px: f32) -> Vec<u32> {
         super::Orientation::Vertical => &line.u,
         super::Orientation::Horizontal => &line.v,
     };
-    let follows = |(a, xa): (u32, f32), (b, xb): (u32, f32)| {
-        b - a <= MAX_GAP + 1 && (xb - xa).abs() <= max_jump_px * (b - a) as f32
-    };
+    let follows = |a, b| continues(a, b, max_jump_px);
     let strength = |s: u32| line.strength[s as usize];
     let last = (across.len() as u32).saturating_sub(1);
     // The last two found samples (index, position across) before the one at hand.
