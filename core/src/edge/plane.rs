@@ -117,8 +117,6 @@ const BLOCK: usize = 16;
 pub(super) struct ColumnMax {
     best: Vec<u8>,
     group: Vec<u8>,
-    /// The current block's maxima.
-    block: Vec<u8>,
 }
 
 /// The first row of each column's maximum: `at[k]` is the least `j` at which `rows.at(j, k)`
@@ -134,34 +132,26 @@ pub(super) fn column_argmax(rows: &Rows<'_>, scratch: &mut ColumnMax, at: &mut [
     scratch.best.resize(w, 0);
     scratch.group.clear();
     scratch.group.resize(w, 0);
-    scratch.block.resize(w, 0);
     for j0 in (0..h).step_by(BLOCK) {
         let j1 = (j0 + BLOCK).min(h);
         let g = (j0 / group_rows) as u8;
-        // The block's maxima, four rows at a time, each row read in order.
-        scratch.block.copy_from_slice(rows.row(j0));
-        for j in (j0 + 1..j1).step_by(4) {
-            let r: [&[u8]; 4] = std::array::from_fn(|i| rows.row((j + i).min(j1 - 1)));
-            let acc = &mut scratch.block;
-            for k in (0..full).step_by(16) {
-                let m = r.iter().fold(load(&acc[k..]), |m, row| m.max(load(&row[k..])));
-                acc[k..k + 16].copy_from_slice(m.as_array());
-            }
-            for k in full..w {
-                acc[k] = r.iter().fold(acc[k], |m, row| m.max(row[k]));
-            }
-        }
         let tag = u8x16::splat(g);
+        // The block's rows (its last repeated where the image ends inside it), read in
+        // order side by side: each 16 columns' block maximum in registers, then merged into
+        // the running maximum and its group.
+        let r: [&[u8]; BLOCK] = std::array::from_fn(|i| rows.row((j0 + i).min(j1 - 1)));
         for k in (0..full).step_by(16) {
-            let (m, old) = (load(&scratch.block[k..]), load(&scratch.best[k..]));
+            let m = r[1..].iter().fold(load(&r[0][k..]), |m, row| m.max(load(&row[k..])));
+            let old = load(&scratch.best[k..]);
             let kept = m.saturating_sub(old).simd_eq(u8x16::ZERO);
             scratch.best[k..k + 16].copy_from_slice(old.max(m).as_array());
             let group = kept.bitselect(load(&scratch.group[k..]), tag);
             scratch.group[k..k + 16].copy_from_slice(group.as_array());
         }
         for k in full..w {
-            if scratch.block[k] > scratch.best[k] {
-                (scratch.best[k], scratch.group[k]) = (scratch.block[k], g);
+            let m = r.iter().fold(0, |m, row| m.max(row[k]));
+            if m > scratch.best[k] {
+                (scratch.best[k], scratch.group[k]) = (m, g);
             }
         }
     }
