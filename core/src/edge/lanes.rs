@@ -17,8 +17,10 @@ pub(super) trait Sample: Copy + PartialOrd {
     fn weighted(s: &[Self]) -> (f64, f64);
     /// Index of the first maximum of `p` (`None` if empty).
     fn argmax(p: &[Self]) -> Option<usize>;
-    /// The peak contrast of every sample: how far it stands above the higher of the samples
-    /// `d` before and after it (zero within `d` of either end, and never negative), into `out`.
+    /// The peak contrast of every sample: how far it stands above the higher of the lowest
+    /// sample within `d` before it and the lowest within `d` after it (zero within `d` of
+    /// either end, and never negative), into `out`. A narrow line a dark gap of one or two
+    /// samples from a brighter surface stands above that gap, not above the surface.
     fn contrast(p: &[Self], d: usize, out: &mut Vec<Self>);
     /// The run of samples above `cut` on either side of `m`, at most `reach` samples each way
     /// and inside `p`: `(first, last)`. `p[m]` itself is not compared.
@@ -64,9 +66,9 @@ impl Sample for u8 {
         out.clear();
         out.resize(p.len(), 0);
         if p.len() > 2 * d {
-            let (a, mid, b) = (&p[..p.len() - 2 * d], &p[d..p.len() - d], &p[2 * d..]);
-            for (((o, &v), &l), &r) in out[d..p.len() - d].iter_mut().zip(mid).zip(a).zip(b) {
-                *o = v.saturating_sub(l.max(r));
+            for (o, w) in out[d..p.len() - d].iter_mut().zip(p.windows(2 * d + 1)) {
+                let low = |s: &[u8]| s.iter().copied().min().unwrap_or(0);
+                *o = w[d].saturating_sub(low(&w[..d]).max(low(&w[d + 1..])));
             }
         }
     }
@@ -185,8 +187,11 @@ impl Sample for f32 {
     fn contrast(p: &[f32], d: usize, out: &mut Vec<f32>) {
         out.clear();
         out.resize(p.len(), 0.0);
-        for i in d..p.len().saturating_sub(d) {
-            out[i] = (p[i] - p[i - d].max(p[i + d])).max(0.0);
+        if p.len() > 2 * d {
+            for (o, w) in out[d..p.len() - d].iter_mut().zip(p.windows(2 * d + 1)) {
+                let low = |s: &[f32]| s.iter().copied().fold(f32::INFINITY, f32::min);
+                *o = (w[d] - low(&w[..d]).max(low(&w[d + 1..]))).max(0.0);
+            }
         }
     }
     type Cut = f32;

@@ -387,6 +387,11 @@ pub(super) fn typical_width(line: &LaserLine, min: usize, scratch: &mut Vec<u32>
 /// Runs shorter than this many times `min_run` are judged by their length as well.
 const BLOB_RUNS: u32 = 4;
 
+/// Runs shorter than this many times `min_run`, and weak, are judged by their wider end's
+/// width (the sheet's tail on the hard phantom's walls at 320x240: 6-9 rows). The hard body's
+/// runs with a highlight at one end are 14-19 rows.
+const SPREAD_RUNS: u32 = 2;
+
 /// A run that fades out at both ends (a glossy highlight's strength falls away from its middle
 /// as a blob's does) must have a body (its samples at least half as strong as its strong ones)
 /// at least this many times as long as its mean width. A line's strength is about even along
@@ -419,7 +424,9 @@ fn faded_body(line: &LaserLine, r: &Run, scratch: &mut Vec<u32>) -> Option<usize
 /// under `SLIVER_STRENGTH` of its median strength and off the course of its strong samples
 /// (`WEAK_OFF_COURSE_PX`), every short run
 /// (under `BLOB_RUNS` times `min_run`) shorter than `MIN_LENGTH_PER_WIDTH` times its mean
-/// width, and every run that fades out at both ends with a body shorter than
+/// width (or, under `SPREAD_RUNS` times `min_run` and under `SLIVER_STRENGTH` of the frame's
+/// median strength, times the width of its wider end: the sheet's tail), and every run that
+/// fades out at both ends with a body shorter than
 /// `BODY_LENGTH_PER_WIDTH` times its median width (a highlight, before any frame has shown the
 /// line's width); returns the samples cleared. A run that spans the whole region is not judged
 /// by its length.
@@ -440,6 +447,8 @@ pub(super) fn drop_short_runs(
     if dropped > 0 {
         list = runs(line, range.clone(), cfg.max_jump_px);
     }
+    // The frame's median strength, where a short run needs it.
+    let mut frame_strength: Option<f32> = None;
     for r in list {
         let mean_width: f32 = (r.first..=r.last).map(|s| line.width[s as usize]).sum::<f32>() / r.count as f32;
         // The faded body and the typical width are judged by the median width: a highlight
@@ -450,8 +459,30 @@ pub(super) fn drop_short_runs(
         let median = median_width(line, &r, scratch);
         // A run that spans the whole region may be cut by it: its length says nothing.
         let whole = r.first == range.start && r.last + 1 == range.end;
+        // The sheet's tail on a surface it grazes is weak and spreads as it goes: a short run
+        // under half the frame's median strength is judged by its wider end (the mean width of
+        // its first or last three samples) where that is above its mean. The line's own short
+        // runs are as strong as the frame's; a highlight that widens their end does not make
+        // them a tail.
+        let mut spread = mean_width;
+        if r.count < SPREAD_RUNS * cfg.min_run {
+            let found = |s: &u32| line.across(*s as usize).is_finite();
+            let end = |it: &mut dyn Iterator<Item = u32>| {
+                let (sum, n) = it.filter(found).take(3).fold((0.0, 0), |(a, n), s| (a + line.width[s as usize], n + 1));
+                sum / n.max(1) as f32
+            };
+            let ends = end(&mut (r.first..=r.last)).max(end(&mut (r.first..=r.last).rev()));
+            if ends > mean_width {
+                let frame = *frame_strength.get_or_insert_with(|| {
+                    self::median(scratch, range.clone().filter(found).map(|s| line.strength[s as usize])).unwrap_or(0.0)
+                });
+                if median_strength(line, &r, scratch) < SLIVER_STRENGTH * frame {
+                    spread = ends;
+                }
+            }
+        }
         let blob = !whole
-            && ((r.count < BLOB_RUNS * cfg.min_run && (r.count as f32) < MIN_LENGTH_PER_WIDTH * mean_width)
+            && ((r.count < BLOB_RUNS * cfg.min_run && (r.count as f32) < MIN_LENGTH_PER_WIDTH * spread)
                 || faded_body(line, &r, scratch).is_some_and(|n| (n as f32) < BODY_LENGTH_PER_WIDTH * median));
         let too_wide =
             r.count < WIDE_RUNS * cfg.min_run && typical_width_px.is_some_and(|t| median > WIDE_RUN_TOLERANCE * t);
@@ -545,6 +576,44 @@ mod tests {
             *u += shift;
         }
         l
+    }
+
+    #[test]
+    fn the_sheets_weak_spreading_tail_is_dropped_the_lines_short_runs_are_not() {
+        // The hard phantom at 320x240 (cam2, frame 64, rows 85-91): where the line leaves one
+        // surface for another, the sheet's tail on the wall between them, 6 px aside, a fifth of
+        // the line's strength, spreading from 2.3 to 5.0 px over seven rows. By its mean width
+        // (3.35 px) it was long enough to keep; its points lay 3-6.5 mm off the wall.
+        let cfg = EdgeConfig::default();
+        let mut scratch = Vec::new();
+        let tail = [2.3, 2.5, 3.0, 2.9, 3.6, 4.1, 5.0];
+        let with_run = |widths: &[f32], strength: f32| {
+            let mut l = line(&[2.0; 60]);
+            for s in 25..28 {
+                l.clear(s);
+            }
+            for (k, &w) in widths.iter().enumerate() {
+                let s = 28 + k;
+                (l.u[s], l.width[s], l.strength[s]) = (l.u[s] + 6.0, w, strength);
+            }
+            for s in 28 + widths.len()..28 + widths.len() + 3 {
+                l.clear(s);
+            }
+            l
+        };
+        let mut l = with_run(&tail, 30.0);
+        let before = l.found();
+        drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch);
+        assert_eq!(l.found(), before - 7, "the tail is dropped");
+        assert!((28..35).all(|s| !l.u[s].is_finite()));
+        // As strong as the frame's line (the line's own short run, its end widened by a
+        // highlight: the widest sample alone goes, as a mixed pixel), or as weak but not
+        // spreading (a dim line on dark print), the run stays.
+        for (widths, strength) in [(tail, 150.0), ([2.4; 7], 30.0)] {
+            let mut l = with_run(&widths, strength);
+            drop_short_runs(&mut l, &cfg, 0..60, None, &mut scratch);
+            assert!((28..34).all(|s| l.u[s].is_finite()), "{widths:?} at strength {strength}");
+        }
     }
 
     #[test]
