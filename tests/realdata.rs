@@ -100,9 +100,10 @@ fn ciclop_laser_line_matches_the_scipy_reference() {
             if method == Method::CenterOfGravity {
                 // The real line is wide and saturated on a shoulder of its own light: the centre
                 // of gravity's samples are those above the shoulder (0.17 px median and 71 %
-                // within 0.3 px when the shoulder counted as the line).
+                // within 0.3 px when the shoulder counted as the line). Measured: medians 0.089 /
+                // 0.079 px, 91.8 / 94.1 % within 0.3 px.
                 assert!(
-                    a.quantile(0.5) <= 0.1 && a.within(0.3) >= 0.85,
+                    a.quantile(0.5) <= 0.1 && a.within(0.3) >= 0.9,
                     "{method:?} on the {input}: median {}",
                     a.quantile(0.5)
                 );
@@ -115,18 +116,20 @@ fn ciclop_laser_line_matches_the_scipy_reference() {
             // laser-on frame alone (the surface's own texture under the line) to a tenth. A few
             // short segments where the line is saturated and 15 px wide (on the shoulder) fall
             // to the rule against short blobs, which keeps highlights and bright stickers out of
-            // frames without laser light: 96 %, not all.
+            // frames without laser light: 98.7 / 99.5 % (1 091 and 1 099 of 1 105), not all.
+            // Measured: medians 0.072 / 0.032 px, 94.6 / 97.4 % within 0.3 px (the laser-on
+            // frame / on - off); 90.4 / 92.5 % while the reference fitted +-8 px only.
             assert!(
-                a.found as f64 >= 0.96 * a.reference_rows as f64,
+                a.found as f64 >= 0.98 * a.reference_rows as f64,
                 "{input}: found {} of {}",
                 a.found,
                 a.reference_rows
             );
             assert!(a.within(3.0) >= 0.99, "{input}: {:.3} within 3 px: jumps off the line", a.within(3.0));
             if input == "on - off" {
-                assert!(a.quantile(0.5) <= 0.05 && a.within(0.3) >= 0.9, "{input}: median {}", a.quantile(0.5));
+                assert!(a.quantile(0.5) <= 0.05 && a.within(0.3) >= 0.95, "{input}: median {}", a.quantile(0.5));
             } else {
-                assert!(a.quantile(0.5) <= 0.1 && a.within(0.3) >= 0.85, "{input}: median {}", a.quantile(0.5));
+                assert!(a.quantile(0.5) <= 0.1 && a.within(0.3) >= 0.92, "{input}: median {}", a.quantile(0.5));
             }
         }
     }
