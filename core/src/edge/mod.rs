@@ -2492,16 +2492,8 @@ mod tests {
                     9.0 + 37.0 * bright + 43.0 * box_line(a, b, c, 1.8) / top
                 });
                 add_noise(&mut img, 2.0, 29);
-                for m in SUBPIXEL_METHODS {
-                    let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
-                    let errs: Vec<f64> = (0..60u32)
-                        .filter_map(|y| Some(f64::from(out.u[y as usize]) - centre(y)).filter(|e| e.is_finite()))
-                        .collect();
-                    let what = format!("{m:?}, edge {gap} px to the {}", if mirror { "right" } else { "left" });
-                    assert!(errs.len() >= 57, "{what}: found in {} of 60 rows", errs.len());
-                    let rms = rms(&errs);
-                    assert!(rms < 0.25, "{what}: rms {rms:.3} px");
-                }
+                let side = if mirror { "right" } else { "left" };
+                assert_found_in_rows(&img, centre, 57, 0.25, &format!("edge {gap} px to the {side}"));
             }
         }
     }
@@ -2597,20 +2589,10 @@ mod tests {
             let centre = |y: u32| edge(y) + gap;
             let mut img = image_from(120, 60, |y, a, b| surfaces(y, a) + 40.0 * box_line(a, b, centre(y), 1.4) / top);
             add_noise(&mut img, 1.5, 53);
-            for m in SUBPIXEL_METHODS {
-                let errs = row_errors(&detect(&img, EdgeConfig { method: m, ..Default::default() }), 60, centre);
-                let what = format!("{m:?}, {gap} px from the face");
-                assert!(errs.len() >= least, "{what}: found in {} of 60 rows", errs.len());
-                let rms = rms(&errs);
-                assert!(rms < 0.15, "{what}: rms {rms:.3} px");
-            }
+            assert_found_in_rows(&img, centre, least, 0.15, &format!("{gap} px from the face"));
         }
         // The face and the print alone: steps, no line.
-        let mut img = image_from(120, 60, |y, a, _| surfaces(y, a));
-        add_noise(&mut img, 1.5, 59);
-        for m in SUBPIXEL_METHODS {
-            assert_eq!(detect(&img, EdgeConfig { method: m, ..Default::default() }).found(), 0, "{m:?}");
-        }
+        assert_no_line(surfaces, 59);
     }
 
     #[test]
@@ -2632,18 +2614,28 @@ mod tests {
             let centre = |y: u32| stripe(y) + offset;
             let mut img = image_from(120, 60, |y, a, b| surfaces(y, a) + 18.0 * box_line(a, b, centre(y), 1.4) / top);
             add_noise(&mut img, 1.5, 41);
-            for m in SUBPIXEL_METHODS {
-                let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
-                let errs = row_errors(&out, 60, centre);
-                let what = format!("{m:?}, {offset} px from the stripe's middle");
-                assert!(errs.len() >= 54, "{what}: found in {} of 60 rows", errs.len());
-                let rms = rms(&errs);
-                assert!(rms < 0.3, "{what}: rms {rms:.3} px");
-            }
+            assert_found_in_rows(&img, centre, 54, 0.3, &format!("{offset} px from the stripe's middle"));
         }
         // The stripe alone, without the line, gives nothing.
+        assert_no_line(surfaces, 43);
+    }
+
+    /// Each sub-pixel method finds the line of `img` (60 rows, centre `centre(y)`) in at least
+    /// `least` rows, within `rms_px` RMS; `what` names the case.
+    fn assert_found_in_rows(img: &Image, centre: impl Fn(u32) -> f64, least: usize, rms_px: f64, what: &str) {
+        for m in SUBPIXEL_METHODS {
+            let errs = row_errors(&detect(img, EdgeConfig { method: m, ..Default::default() }), 60, &centre);
+            assert!(errs.len() >= least, "{m:?}, {what}: found in {} of 60 rows", errs.len());
+            let rms = rms(&errs);
+            assert!(rms < rms_px, "{m:?}, {what}: rms {rms:.3} px");
+        }
+    }
+
+    /// No sub-pixel method finds a line in the 120 x 60 image of `surfaces` under noise of 1.5
+    /// grey levels (seed `seed`).
+    fn assert_no_line(surfaces: impl Fn(u32, f64) -> f64, seed: u64) {
         let mut img = image_from(120, 60, |y, a, _| surfaces(y, a));
-        add_noise(&mut img, 1.5, 43);
+        add_noise(&mut img, 1.5, seed);
         for m in SUBPIXEL_METHODS {
             assert_eq!(detect(&img, EdgeConfig { method: m, ..Default::default() }).found(), 0, "{m:?}");
         }
