@@ -302,11 +302,18 @@ fn a_killed_triangulator_is_respawned_and_the_scan_says_what_it_lost() {
     assert!(c1["gaps"].as_array().unwrap().iter().any(|g| g["frames"].as_u64().unwrap() >= 8), "{c1}");
     assert!(launch_log.contains("merger: scan 1: cam1 lost"), "{}", ctx());
     // Scan 2: both cameras, next to nothing lost (best effort over a loaded machine drops a few).
+    // The synthetic camera skips the frames it cannot render in time while the other live tests
+    // load both cores (`frames_not_sent`: 13 of 149 in one suite run, 8 of them lost): the chain
+    // itself loses next to nothing, and in all at most a tenth.
     assert_eq!(s2["merged"], serde_json::json!(["cam1", "cam2"]), "{s2}");
     for c in ["cam1", "cam2"] {
         let r = cam(&s2, c);
-        let (lost, expected) = (r["frames_lost"].as_u64().unwrap(), r["frames_expected"].as_u64().unwrap());
-        assert!(expected > 80 && lost * 20 <= expected, "scan 2 {c}: {r}");
+        let count = |k: &str| r[k].as_u64().unwrap();
+        let (lost, expected, not_sent) = (count("frames_lost"), count("frames_expected"), count("frames_not_sent"));
+        assert!(
+            expected > 80 && lost.saturating_sub(not_sent) * 20 <= expected && lost * 10 <= expected,
+            "scan 2 {c}: {r}"
+        );
     }
     for f in ["merged.ply", "cam1.ply", "cam2.ply"] {
         assert!(files.join("scan_2").join(f).is_file(), "scan 2 {f}\n{}", ctx());
