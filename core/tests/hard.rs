@@ -329,7 +329,8 @@ fn body_320x240_mono8_meets_the_floor_but_the_hair_with_second_surfaces() {
     // direction's midpoint placed; 95.17 / 94.89 before a run was judged by its median width),
     // RMS 0.647 / 0.680 mm, 0.022 / 0.022 % beyond 5 mm.
     // With the first line alone (the report): coverage 95.12 / 94.71 %. The hair: 40.9 / 5.7 %
-    // (39.7 / 1.8 % before a peak's contrast was taken over the lowest samples beside it);
+    // with the second line, 32.9 / 5.7 % with the first alone (39.7 / 1.8 and 31.7 / 1.8 %
+    // before a peak's contrast was taken over the lowest samples beside it);
     // most of cam2's hair line lies under a signal-to-noise ratio of 16 (`probe_dark_misses`),
     // on the ramp up to the bright skin beside the hair.
     // The scan opens with laser-off frames: a glossy highlight on the body (about 12 px wide,
