@@ -697,6 +697,79 @@ fn find_peak<S: Sample>(
         })
 }
 
+/// A narrow peak on a run's course (`track::extend`'s search): the line continued from the
+/// rows beside it, where the full tests refuse it because a brighter surface lies a sample or
+/// two off (a line on dark print right beside the print's edge: the hard pyramid at 320x240,
+/// `face 45 | 24 | line 45 | 18 | print 8 8 8`). Its base is the higher of the lowest sample
+/// within two on each side; its darker side's flank, the samples under the base from three
+/// out (at least `DARK_FLANK`, at most `flank_px`). It must stand `COURSE_STRENGTH` times
+/// `min_strength`, and `noise_factor` times that flank's noise, above its base; the base must
+/// lie under half the peak over the flank (a line falls away on both sides; the top of a
+/// brighter surface's edge does not); and it must be at most `narrow_width_px` wide at half
+/// its height over the base. Its centre is the centre of gravity of the three samples about
+/// the peak over the flank's level.
+fn course_peak<S: Sample>(p: &[S], m: usize, cfg: &EdgeConfig, scale: f32) -> Option<Peak> {
+    let n = p.len();
+    if m < 3 || m + 3 >= n {
+        return None;
+    }
+    let peak = p[m].f();
+    let (lo_l, lo_r) = (p[m - 2].f().min(p[m - 1].f()), p[m + 1].f().min(p[m + 2].f()));
+    let base = lo_l.max(lo_r);
+    let strength = peak - base;
+    // The darker side's flank: from three samples out, the samples below the base.
+    let flank = cfg.flank_px as usize;
+    let (mut sum, mut squares, mut count) = (0.0f32, 0.0f32, 0usize);
+    let mut take = |v: f32| {
+        (sum, squares, count) = (sum + v, squares + v * v, count + 1);
+    };
+    if lo_l <= lo_r {
+        for i in (m.saturating_sub(2 + flank)..m - 2).rev() {
+            if p[i].f() >= base {
+                break;
+            }
+            take(p[i].f());
+        }
+    } else {
+        for i in m + 3..(m + 3 + flank).min(n) {
+            if p[i].f() >= base {
+                break;
+            }
+            take(p[i].f());
+        }
+    }
+    if count < DARK_FLANK {
+        return None;
+    }
+    let dark = sum / count as f32;
+    let noise = ((squares - sum * dark) / count as f32).max(0.0).sqrt();
+    // Both sides fall below half the peak over the dark flank within two samples: a line, not
+    // the top of a bright surface's edge it merges into.
+    if strength < (COURSE_STRENGTH * cfg.min_strength * scale).max(cfg.noise_factor * noise)
+        || base > dark + 0.5 * (peak - dark)
+    {
+        return None;
+    }
+    let half = base + 0.5 * strength;
+    let (l, r) = S::run(p, m, 2, S::cut(half));
+    let width = crossing(p, r + 1, r, half) - crossing(p, l - 1, l, half);
+    if width > cfg.narrow_width_px {
+        return None;
+    }
+    let w = |i: usize| (p[i].f() - dark).max(0.0);
+    let (a, b, c) = (w(m - 1), w(m), w(m + 1));
+    let pos = m as f32 + (c - a) / (a + b + c);
+    Some(Peak { pos, strength, width, saturated: false, fit: None, fallback: None })
+}
+
+/// A narrow peak on a run's course stands this many times `min_strength` above its base
+/// (`course_peak`).
+const COURSE_STRENGTH: f32 = 1.0;
+
+/// A narrow peak on a run's course (`course_peak`) lies at most this far from where the course
+/// is expected, pixels (the search's radius grows with the rows missed, this does not).
+const COURSE_REACH_PX: f32 = 1.5;
+
 /// The extents `(start..end, rstart..rend)` of the dark flanks beside the half-maximum run
 /// `(lo, hi)`: from two samples beyond it outwards, each the samples below `level` (at most
 /// `flank`) up to the first sample that is not (a brighter surface beside the line). A side
@@ -1010,19 +1083,22 @@ impl Search<'_, '_> {
     /// The line in sample `s`: the strongest peak that passes every test (up to
     /// `max_candidates` tried), or with `near = (centre, radius)` the strongest within `radius`
     /// of `centre` (absolute position across). Position is absolute.
-    fn sample(&self, s: u32, near: Option<(f32, f32)>, buf: &mut Scratch) -> Option<Peak> {
+    ///
+    /// With `course` (a search on a run's course, `near` given), a narrow peak that fails the
+    /// full tests may still pass [`course_peak`]'s.
+    fn sample(&self, s: u32, near: Option<(f32, f32)>, course: bool, buf: &mut Scratch) -> Option<Peak> {
         let enc = self.image.encoding();
         let (x0, x1) = (self.inner.start as usize, self.inner.end as usize);
         let peak = if let Some(c) = &self.columns {
-            self.column(c, (s - self.outer.start) as usize, near, buf)
+            self.column(c, (s - self.outer.start) as usize, near, course, buf)
         } else if let Some(plane) = self.plane {
             let (n, k) = (x1 - x0, (s - self.outer.start) as usize);
-            self.locate(&plane[k * n..(k + 1) * n], near, &mut buf.contrast_u8)
+            self.locate(&plane[k * n..(k + 1) * n], near, course, &mut buf.contrast_u8)
         } else if self.vertical && enc == Encoding::Mono8 {
-            self.locate(&self.image.row(s)[x0..x1], near, &mut buf.contrast_u8)
+            self.locate(&self.image.row(s)[x0..x1], near, course, &mut buf.contrast_u8)
         } else {
             fill_profile(self.image, s, self.inner.clone(), self.vertical, self.cfg.channel, &mut buf.profile);
-            self.locate(&buf.profile[..], near, &mut buf.contrast_f32)
+            self.locate(&buf.profile[..], near, course, &mut buf.contrast_f32)
         }?;
         let shift = |f| match f {
             Fit::Centre { centre, sigma } => Fit::Centre { centre: centre + x0 as f32, sigma },
@@ -1033,7 +1109,14 @@ impl Search<'_, '_> {
 
     /// The line in column `k` of `c` (position in the region), as [`Search::locate`] finds it
     /// in the whole column.
-    fn column(&self, c: &Columns<'_>, k: usize, near: Option<(f32, f32)>, buf: &mut Scratch) -> Option<Peak> {
+    fn column(
+        &self,
+        c: &Columns<'_>,
+        k: usize,
+        near: Option<(f32, f32)>,
+        course: bool,
+        buf: &mut Scratch,
+    ) -> Option<Peak> {
         let n = c.rows;
         if near.is_none() && self.cfg.method != Method::Gradient {
             // The first candidate on its window: the column's other bytes are never read.
@@ -1055,7 +1138,7 @@ impl Search<'_, '_> {
             plane::transpose_into(n, k1 - k0, |j| &rows.row(j)[k0..], &mut buf.strips[k0 * n..k1 * n]);
             buf.ready[strip] = true;
         }
-        self.locate(&buf.strips[k * n..(k + 1) * n], near, &mut buf.contrast_u8)
+        self.locate(&buf.strips[k * n..(k + 1) * n], near, course, &mut buf.contrast_u8)
     }
 
     /// For a candidate far wider than the line's typical width (`WIDE_PEAK_TOLERANCE`): the
@@ -1068,7 +1151,13 @@ impl Search<'_, '_> {
         })
     }
 
-    fn locate<S: Sample>(&self, p: &[S], near: Option<(f32, f32)>, contrast: &mut Vec<S>) -> Option<Peak> {
+    fn locate<S: Sample>(
+        &self,
+        p: &[S],
+        near: Option<(f32, f32)>,
+        course: bool,
+        contrast: &mut Vec<S>,
+    ) -> Option<Peak> {
         let cfg = self.cfg;
         if cfg.method == Method::Gradient {
             return gradient_edge(p, cfg.gradient_threshold * self.scale);
@@ -1077,7 +1166,21 @@ impl Search<'_, '_> {
         if let Some((c, r)) = near {
             let (a, b) = ((c - off - r).max(0.0) as usize, ((c - off + r).max(0.0) as usize + 1).min(p.len()));
             let m = a + S::argmax(p.get(a..b)?)?;
-            let peak = find_peak(p, m, cfg, self.scale, self.saturation).ok()?;
+            let peak = match (find_peak(p, m, cfg, self.scale, self.saturation), course) {
+                (Ok(peak), _) => peak,
+                (Err(_), false) => return None,
+                (Err(_), true) => {
+                    // The sample that stands highest over its lowest neighbours within two (the
+                    // window's brightest may be a brighter surface's edge beside the line).
+                    let local = |i: usize| {
+                        let (l, r) = (p[i - 2].f().min(p[i - 1].f()), p[i + 1].f().min(p[i + 2].f()));
+                        p[i].f() - l.max(r)
+                    };
+                    let m = (a.max(3)..b.min(p.len().saturating_sub(3)))
+                        .max_by(|&i, &j| local(i).total_cmp(&local(j)).then(j.cmp(&i)))?;
+                    course_peak(p, m, cfg, self.scale).filter(|pk| (pk.pos + off - c).abs() <= COURSE_REACH_PX)?
+                }
+            };
             return ((peak.pos + off - c).abs() <= r).then_some(peak);
         }
         // Brightest first, then the sample of the highest peak contrast (a dim line in a dark
@@ -1292,7 +1395,7 @@ impl EdgeDetector {
         let before = (previous.shape == (w, h, vertical) && cfg.method != Method::Gradient).then_some(&previous);
         for s in search.outer.clone() {
             stats.searched += 1;
-            let mut peak = search.sample(s, None, &mut self.scratch);
+            let mut peak = search.sample(s, None, false, &mut self.scratch);
             // Where a row holds several peaks, continuity with the last frame chooses: the
             // strongest candidate stands only if no line continues the last frame's there (as
             // near as `max_jump_px`, at least half as strong: a highlight or a texture peak does
@@ -1309,9 +1412,12 @@ impl EdgeDetector {
         if cfg.method != Method::Gradient {
             let profile = &mut self.scratch;
             let state = &mut self.state;
-            track::extend(out, cfg, search.outer.clone(), |out, s, near| {
+            track::extend(out, cfg, search.outer.clone(), |out, s, near, held| {
                 // A search that finds nothing near this run's course leaves the sample as it was.
-                let peak = search.sample(s, Some(near), profile);
+                // A narrow peak that only the course's tests pass fills an empty sample or one of
+                // a run too short to stand (never a real line's shorter run beside this one).
+                let course = held < cfg.min_run;
+                let peak = search.sample(s, Some(near), course, profile);
                 let found = peak.is_some();
                 if found {
                     put(out, state, s, peak);
@@ -1364,7 +1470,7 @@ fn continue_last(
     scratch: &mut Scratch,
 ) -> Option<Peak> {
     let continues = |p: &Peak| p.fallback.is_none() && p.strength >= PREVIOUS_STRENGTH * strength * search.scale;
-    search.sample(s, Some((q, search.cfg.max_jump_px)), scratch).filter(continues).or(peak)
+    search.sample(s, Some((q, search.cfg.max_jump_px)), false, scratch).filter(continues).or(peak)
 }
 
 /// The second surfaces' samples beside `first` (see [`EdgeDetector::detect_surfaces`]),
@@ -1381,7 +1487,7 @@ fn second_line(
         if second.u[s as usize].is_finite() {
             return track::Probe::Taken;
         }
-        let Some(peak) = search.sample(s, Some(near), scratch) else { return track::Probe::Missed };
+        let Some(peak) = search.sample(s, Some(near), false, scratch) else { return track::Probe::Missed };
         // Two lines closer than twice their widths are one line, or a line and its halo.
         let apart = 2.0 * peak.width.max(first.width[s as usize]).max(1.0);
         if (peak.pos - held).abs() < apart {
@@ -2578,14 +2684,15 @@ mod tests {
         // levels. The line stands over the one or two dark samples between it and the face, not
         // over the face three samples off: while the peak contrast compared it with the samples
         // three away, it was a candidate only where the face's edge had fallen by then (found in
-        // 0 / 30 / 54 of the 60 rows at 2.2 / 2.5 / 2.8 px; now 28 / 45 / 56). Nearer the face,
-        // its ramp meets the line's tail and the dark flank is too short.
+        // 0 / 30 / 54 of the 60 rows at 2.2 / 2.5 / 2.8 px; then 28 / 45 / 56). Nearer the face,
+        // its ramp meets the line's tail and the dark flank is too short; the rows found are
+        // followed along their course there (`course_peak`: 60 / 47 / 60 rows).
         let top = box_line(-0.5, 0.5, 0.0, 1.4);
         let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
         let edge = |y: u32| 50.0 + 0.05 * f64::from(y);
         let surfaces =
             |y: u32, a: f64| 11.0 + 44.0 * smooth(edge(y) - (a + 0.5)) + 39.0 * smooth(a + 0.5 - edge(y) - 16.0);
-        for (gap, least) in [(2.2, 20), (2.5, 40), (2.8, 54)] {
+        for (gap, least) in [(2.2, 50), (2.5, 40), (2.8, 54)] {
             let centre = |y: u32| edge(y) + gap;
             let mut img = image_from(120, 60, |y, a, b| surfaces(y, a) + 40.0 * box_line(a, b, centre(y), 1.4) / top);
             add_noise(&mut img, 1.5, 53);
@@ -2593,6 +2700,40 @@ mod tests {
         }
         // The face and the print alone: steps, no line.
         assert_no_line(surfaces, 59);
+    }
+
+    #[test]
+    fn a_line_nearing_a_brighter_faces_edge_is_followed_along_its_course() {
+        // The hard pyramid's print at 320x240 in grey where the sheet nears the print's edge: a
+        // bright face (55), the print (11), and the line on the print (40 levels, 1.4 px wide,
+        // noise 1.5), its distance from the face's edge falling from 3.5 px in the first row to
+        // 1.8 or 1.5 px in the last. Where a single dark sample separates the two, the line's
+        // full tests read the face for its background and refuse it (found in 35 and 37 of the
+        // 60 rows so); the run found farther from the edge is followed on (`course_peak`): 54
+        // and 52 rows, RMS 0.10 px.
+        let top = box_line(-0.5, 0.5, 0.0, 1.4);
+        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
+        let edge = |y: u32| 50.0 + 0.05 * f64::from(y);
+        let surfaces =
+            |y: u32, a: f64| 11.0 + 44.0 * smooth(edge(y) - (a + 0.5)) + 39.0 * smooth(a + 0.5 - edge(y) - 16.0);
+        for gap in [1.8, 1.5] {
+            let centre = |y: u32| edge(y) + 3.5 - (3.5 - gap) * f64::from(y) / 59.0;
+            let mut img = image_from(120, 60, |y, a, b| surfaces(y, a) + 40.0 * box_line(a, b, centre(y), 1.4) / top);
+            add_noise(&mut img, 1.5, 61);
+            assert_found_in_rows(&img, centre, 50, 0.2, &format!("nearing the face to {gap} px"));
+        }
+        // Where the line ends (hidden from row 30 on), its course is not followed onto the
+        // face's edge or the print beside it.
+        let centre = |y: u32| edge(y) + 3.5 - 1.5 * f64::from(y) / 59.0;
+        let mut img = image_from(120, 60, |y, a, b| {
+            surfaces(y, a) + if y < 30 { 40.0 * box_line(a, b, centre(y), 1.4) / top } else { 0.0 }
+        });
+        add_noise(&mut img, 1.5, 67);
+        for m in SUBPIXEL_METHODS {
+            let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
+            let beyond = (30..60).filter(|&y| out.u[y].is_finite()).count();
+            assert_eq!(beyond, 0, "{m:?}: {beyond} samples past the line's end");
+        }
     }
 
     #[test]

@@ -106,14 +106,15 @@ fn strays(line: &LaserLine, range: Range<u32>, max_jump_px: f32) -> Vec<u32> {
 
 /// Extends every run of at least `min_run` samples, longest first, beyond its ends: the next
 /// sample's position is extrapolated from the run's last samples, and `probe(line, s, (centre,
-/// radius))` searches sample `s` near it, writing what it finds (and leaving the sample as it
-/// was when it finds nothing) and saying whether it found a peak. A sample that a longer run already holds stops the
-/// extension; one that a shorter run holds is searched again near this run's course.
+/// radius), held)` searches sample `s` near it, writing what it finds (and leaving the sample
+/// as it was when it finds nothing) and saying whether it found a peak; `held` is the length of
+/// the run that holds the sample (zero for none). A sample that a longer run already holds
+/// stops the extension; one that a shorter run holds is searched again near this run's course.
 pub(super) fn extend(
     line: &mut LaserLine,
     cfg: &EdgeConfig,
     range: Range<u32>,
-    mut probe: impl FnMut(&mut LaserLine, u32, (f32, f32)) -> bool,
+    mut probe: impl FnMut(&mut LaserLine, u32, (f32, f32), u32) -> bool,
 ) {
     let mut list = runs(line, range.clone(), cfg.max_jump_px);
     if list.len() <= 1 && list.first().is_none_or(|r| r.first == range.start && r.last + 1 == range.end) {
@@ -146,7 +147,8 @@ pub(super) fn extend(
                 }
                 let centre = extrapolate(line, end, forward, step, cfg.max_jump_px);
                 let radius = cfg.max_jump_px * step as f32;
-                if probe(line, s, (centre, radius)) {
+                let held = list.get(owner[s as usize] as usize).map_or(0, |r| r.count);
+                if probe(line, s, (centre, radius), held) {
                     owner[s as usize] = rank;
                     (end, misses) = (s, 0);
                 } else {
