@@ -2676,59 +2676,64 @@ mod tests {
         }
     }
 
+    /// Where the sheet enters the hard phantom's print at 320x240 in grey: a bright face (55) up
+    /// to `face_edge(y)`, then the print (11), and a brighter surface (50) 16 px on.
+    fn face_edge(y: u32) -> f64 {
+        50.0 + 0.05 * f64::from(y)
+    }
+
+    /// The level of `face_edge`'s surfaces at `a` in row `y`.
+    fn face_and_print(y: u32, a: f64) -> f64 {
+        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
+        11.0 + 44.0 * smooth(face_edge(y) - (a + 0.5)) + 39.0 * smooth(a + 0.5 - face_edge(y) - 16.0)
+    }
+
+    /// `face_and_print` with a line on the print, 40 levels over it and 1.4 px wide, centred at
+    /// `centre(y)` in the rows where `lit(y)`, under noise of 1.5 levels (`seed`).
+    fn line_on_print(centre: impl Fn(u32) -> f64, lit: impl Fn(u32) -> bool, seed: u64) -> Image {
+        let top = box_line(-0.5, 0.5, 0.0, 1.4);
+        let mut img = image_from(120, 60, |y, a, b| {
+            face_and_print(y, a) + if lit(y) { 40.0 * box_line(a, b, centre(y), 1.4) / top } else { 0.0 }
+        });
+        add_noise(&mut img, 1.5, seed);
+        img
+    }
+
     #[test]
     fn narrow_line_two_dark_samples_from_a_brighter_face_is_found() {
-        // The hard phantom's print at 320x240 in grey where the sheet enters it: a bright face
-        // (55), then the print (11), and the line on the print 2.2-2.8 px from the face's edge,
-        // about as bright as the face (40 levels over the print, 1.4 px wide), under noise of 1.5
-        // levels. The line stands over the one or two dark samples between it and the face, not
-        // over the face three samples off: while the peak contrast compared it with the samples
-        // three away, it was a candidate only where the face's edge had fallen by then (found in
-        // 0 / 30 / 54 of the 60 rows at 2.2 / 2.5 / 2.8 px; then 28 / 45 / 56). Nearer the face,
+        // The hard phantom's print at 320x240 in grey where the sheet enters it (`line_on_print`):
+        // the line on the print 2.2-2.8 px from the face's edge, about as bright as the face. The
+        // line stands over the one or two dark samples between it and the face, not over the
+        // face three samples off: while the peak contrast compared it with the samples three
+        // away, it was a candidate only where the face's edge had fallen by then (found in 0 /
+        // 30 / 54 of the 60 rows at 2.2 / 2.5 / 2.8 px; then 28 / 45 / 56). Nearer the face,
         // its ramp meets the line's tail and the dark flank is too short; the rows found are
         // followed along their course there (`course_peak`: 60 / 47 / 60 rows).
-        let top = box_line(-0.5, 0.5, 0.0, 1.4);
-        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
-        let edge = |y: u32| 50.0 + 0.05 * f64::from(y);
-        let surfaces =
-            |y: u32, a: f64| 11.0 + 44.0 * smooth(edge(y) - (a + 0.5)) + 39.0 * smooth(a + 0.5 - edge(y) - 16.0);
         for (gap, least) in [(2.2, 50), (2.5, 40), (2.8, 54)] {
-            let centre = |y: u32| edge(y) + gap;
-            let mut img = image_from(120, 60, |y, a, b| surfaces(y, a) + 40.0 * box_line(a, b, centre(y), 1.4) / top);
-            add_noise(&mut img, 1.5, 53);
+            let centre = |y: u32| face_edge(y) + gap;
+            let img = line_on_print(centre, |_| true, 53);
             assert_found_in_rows(&img, centre, least, 0.15, &format!("{gap} px from the face"));
         }
         // The face and the print alone: steps, no line.
-        assert_no_line(surfaces, 59);
+        assert_no_line(face_and_print, 59);
     }
 
     #[test]
     fn a_line_nearing_a_brighter_faces_edge_is_followed_along_its_course() {
-        // The hard pyramid's print at 320x240 in grey where the sheet nears the print's edge: a
-        // bright face (55), the print (11), and the line on the print (40 levels, 1.4 px wide,
-        // noise 1.5), its distance from the face's edge falling from 3.5 px in the first row to
-        // 1.8 or 1.5 px in the last. Where a single dark sample separates the two, the line's
-        // full tests read the face for its background and refuse it (found in 35 and 37 of the
-        // 60 rows so); the run found farther from the edge is followed on (`course_peak`): 54
-        // and 52 rows, RMS 0.10 px.
-        let top = box_line(-0.5, 0.5, 0.0, 1.4);
-        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
-        let edge = |y: u32| 50.0 + 0.05 * f64::from(y);
-        let surfaces =
-            |y: u32, a: f64| 11.0 + 44.0 * smooth(edge(y) - (a + 0.5)) + 39.0 * smooth(a + 0.5 - edge(y) - 16.0);
+        // The hard pyramid's print at 320x240 in grey where the sheet nears the print's edge
+        // (`line_on_print`): the line's distance from the face's edge falls from 3.5 px in the
+        // first row to 1.8 or 1.5 px in the last. Where a single dark sample separates the two,
+        // the line's full tests read the face for its background and refuse it (found in 35 and
+        // 37 of the 60 rows so); the run found farther from the edge is followed on
+        // (`course_peak`): 54 and 52 rows, RMS 0.10 px.
         for gap in [1.8, 1.5] {
-            let centre = |y: u32| edge(y) + 3.5 - (3.5 - gap) * f64::from(y) / 59.0;
-            let mut img = image_from(120, 60, |y, a, b| surfaces(y, a) + 40.0 * box_line(a, b, centre(y), 1.4) / top);
-            add_noise(&mut img, 1.5, 61);
+            let centre = |y: u32| face_edge(y) + 3.5 - (3.5 - gap) * f64::from(y) / 59.0;
+            let img = line_on_print(centre, |_| true, 61);
             assert_found_in_rows(&img, centre, 50, 0.2, &format!("nearing the face to {gap} px"));
         }
         // Where the line ends (hidden from row 30 on), its course is not followed onto the
         // face's edge or the print beside it.
-        let centre = |y: u32| edge(y) + 3.5 - 1.5 * f64::from(y) / 59.0;
-        let mut img = image_from(120, 60, |y, a, b| {
-            surfaces(y, a) + if y < 30 { 40.0 * box_line(a, b, centre(y), 1.4) / top } else { 0.0 }
-        });
-        add_noise(&mut img, 1.5, 67);
+        let img = line_on_print(|y| face_edge(y) + 3.5 - 1.5 * f64::from(y) / 59.0, |y| y < 30, 67);
         for m in SUBPIXEL_METHODS {
             let out = detect(&img, EdgeConfig { method: m, ..Default::default() });
             let beyond = (30..60).filter(|&y| out.u[y].is_finite()).count();
