@@ -1170,14 +1170,11 @@ impl Search<'_, '_> {
                 (Ok(peak), _) => peak,
                 (Err(_), false) => return None,
                 (Err(_), true) => {
-                    // The sample that stands highest over its lowest neighbours within two (the
-                    // window's brightest may be a brighter surface's edge beside the line).
-                    let local = |i: usize| {
-                        let (l, r) = (p[i - 2].f().min(p[i - 1].f()), p[i + 1].f().min(p[i + 2].f()));
-                        p[i].f() - l.max(r)
-                    };
-                    let m = (a.max(3)..b.min(p.len().saturating_sub(3)))
-                        .max_by(|&i, &j| local(i).total_cmp(&local(j)).then(j.cmp(&i)))?;
+                    // The window's sample of highest peak contrast over the lowest samples within
+                    // two (its brightest may be a brighter surface's edge beside the line).
+                    let (a, b) = (a.max(3), b.min(p.len().saturating_sub(3)));
+                    S::contrast(p.get(a - 2..b + 2)?, 2, contrast);
+                    let m = a + S::argmax(contrast.get(2..(b + 2).checked_sub(a)?)?)?;
                     course_peak(p, m, cfg, self.scale).filter(|pk| (pk.pos + off - c).abs() <= COURSE_REACH_PX)?
                 }
             };
