@@ -641,7 +641,7 @@ fn find_peak<S: Sample>(
     };
     // With the first flanks, the first pass's run is the half-maximum run.
     let known = (gap == gap0).then_some((lo, hi));
-    let first = judge(p, m, &f, known, cfg, (scale, saturation), run);
+    let first = judge(p, m, &f, known, cfg, (scale, saturation, true), run);
     // A line a pixel or two wide, clearly above its near samples, that fails with flanks `gap0`
     // out may lie in a narrow dark stripe between brighter surfaces: its background is right
     // beside it, GAP_PER_WIDTH times its width out.
@@ -658,7 +658,21 @@ fn find_peak<S: Sample>(
         a >= 2 && b + 2 < n && peak - p[a - 2].f().max(p[b + 2].f()) >= by * cfg.min_strength * scale
     };
     let clear = |r| clear_by(r, NARROW_RETRY);
-    let Some((glo, ghi)) = [(lo.min(llo), hi.max(lhi)), (lo, hi)].into_iter().find(|&r| clear_by(r, STRIPE_RETRY))
+    let runs = [(lo.min(llo), hi.max(lhi)), (lo, hi)];
+    // A line a single dark sample from a brighter surface (the print's edge right beside it)
+    // stands over the lower of the two samples beyond its run on that side, not over the
+    // second: it is tried as a line in a stripe with that side's flank one sample long.
+    let close_by = |(a, b): (usize, usize)| {
+        a >= 2
+            && b + 2 < n
+            && peak - p[a - 2].f().min(p[a - 1].f()).max(p[b + 1].f().min(p[b + 2].f()))
+                >= STRIPE_RETRY * cfg.min_strength * scale
+    };
+    let Some((glo, ghi, close)) = runs
+        .into_iter()
+        .find(|&r| clear_by(r, STRIPE_RETRY))
+        .map(|(a, b)| (a, b, false))
+        .or_else(|| runs.into_iter().find(|&r| close_by(r)).map(|(a, b)| (a, b, true)))
     else {
         return first;
     };
@@ -667,7 +681,7 @@ fn find_peak<S: Sample>(
     let near = ((GAP_PER_WIDTH * w0).ceil() as usize).clamp(1, max_hw);
     let beside = background(p, m, near, flank)
         .filter(|_| near < gap && clear((lo, hi)))
-        .map_or(Err(run), |f| judge(p, m, &f, None, cfg, (scale, saturation), run));
+        .map_or(Err(run), |f| judge(p, m, &f, None, cfg, (scale, saturation, true), run));
     // On a dark surface a few pixels from a brighter one (dark print beside bare skin under
     // room light), even the flanks `near` out reach the bright surface: the background is then
     // the dark samples between the line and it, up to the first sample above the half maximum.
@@ -679,18 +693,25 @@ fn find_peak<S: Sample>(
     // peak, and even then it is a fallback that a line found otherwise in the row displaces: a
     // narrow mark on a textured floor passes the same tests (the robot's real frames lost a few
     // hundred columns when such marks were taken first).
-    let beside_dark = p[glo - 2].f().max(p[ghi + 2].f());
+    let beside_dark = if close {
+        p[glo - 2].f().min(p[glo - 1].f()).max(p[ghi + 1].f().min(p[ghi + 2].f()))
+    } else {
+        p[glo - 2].f().max(p[ghi + 2].f())
+    };
     let dark_level = level.min(beside_dark + 0.5 * (peak - beside_dark));
     beside
         .or_else(|_| {
             let f = dark_background(p, (lo, hi), flank, level).filter(|_| clear((lo, hi))).ok_or(run)?;
-            judge(p, m, &f, None, cfg, (scale, saturation), run)
+            judge(p, m, &f, None, cfg, (scale, saturation, true), run)
         })
         .or_else(|e| {
             dark_flanks(p, (glo, ghi), flank, dark_level)
                 .filter(|&e| enclosed(p, e, peak))
-                .and_then(|e| dark_flanks_background(p, e, flank))
-                .and_then(|f| judge(p, m, &f, None, cfg, (scale, saturation), run).ok())
+                .and_then(|e| Some((e, dark_flanks_background(p, e, flank, SHORT_DARK_FLANK)?)))
+                .and_then(|([start, end, rstart, rend], f)| {
+                    let shoulders = (end - start).min(rend - rstart) >= DARK_FLANK;
+                    judge(p, m, &f, None, cfg, (scale, saturation, shoulders), run).ok()
+                })
                 .filter(|pk| pk.width <= cfg.narrow_width_px)
                 .map(|pk| Peak { fallback: Some(run), ..pk })
                 .ok_or(e)
@@ -802,14 +823,22 @@ fn dark_flanks<S: Sample>(p: &[S], (lo, hi): (usize, usize), flank: usize, level
 /// `DARK_FLANK` samples and ends at a brighter sample or at its full length, never at the
 /// profile's end.
 fn dark_background<S: Sample>(p: &[S], run: (usize, usize), flank: usize, level: f32) -> Option<Flanks> {
-    dark_flanks(p, run, flank, level).and_then(|e| dark_flanks_background(p, e, flank))
+    dark_flanks(p, run, flank, level).and_then(|e| dark_flanks_background(p, e, flank, DARK_FLANK))
 }
 
 /// The background of the dark flanks with extents `[start, end, rstart, rend]`, as
-/// `dark_background`.
-fn dark_flanks_background<S: Sample>(p: &[S], [start, end, rstart, rend]: [usize; 4], flank: usize) -> Option<Flanks> {
-    let closed = |a: usize, b: usize, edge: bool| b - a >= DARK_FLANK && (b - a == flank || !edge);
-    if !closed(start, end, start == 0) || !closed(rstart, rend, rend == p.len()) {
+/// `dark_background`, but for the shorter side, which needs only `short` samples.
+fn dark_flanks_background<S: Sample>(
+    p: &[S],
+    [start, end, rstart, rend]: [usize; 4],
+    flank: usize,
+    short: usize,
+) -> Option<Flanks> {
+    let least = |a: usize, b: usize, c: usize, d: usize| if b - a >= d - c { DARK_FLANK } else { short };
+    let closed = |a: usize, b: usize, edge: bool, least: usize| b - a >= least && (b - a == flank || !edge);
+    if !closed(start, end, start == 0, least(start, end, rstart, rend))
+        || !closed(rstart, rend, rend == p.len(), least(rstart, rend, start, end))
+    {
         return None;
     }
     // The whole of each flank: its halves are not compared, the brighter surface is outside it.
@@ -835,17 +864,23 @@ const ENCLOSED_REACH: usize = 3;
 /// The fewest samples of a flank between a narrow line and a brighter surface beside it.
 const DARK_FLANK: usize = 2;
 
+/// The fewest samples of the shorter flank of a narrow line in a dark stripe enclosed by
+/// brighter surfaces (the other flank holds `DARK_FLANK`).
+const SHORT_DARK_FLANK: usize = 1;
+
 /// The tests of a peak at `m` against its flanks `f`, and its centre: too weak for the local
 /// noise, a step rather than a peak, cut off by the edge of the profile, or too wide or narrow
 /// is refused (with `run`, where the next candidate is not looked for). `known` is the
-/// half-maximum run when it is already known.
+/// half-maximum run when it is already known. `shoulders`: whether a brighter surface two or
+/// three samples beyond the half-maximum run raises the level of the centre's samples (not
+/// where the flanks end at that surface, a dark sample parting it from the line).
 fn judge<S: Sample>(
     p: &[S],
     m: usize,
     f: &Flanks,
     known: Option<(usize, usize)>,
     cfg: &EdgeConfig,
-    (scale, saturation): (f32, f32),
+    (scale, saturation, shoulders): (f32, f32, bool),
     run: (usize, usize),
 ) -> Result<Peak, (usize, usize)> {
     let n = p.len();
@@ -889,7 +924,7 @@ fn judge<S: Sample>(
     let at = |i: usize| p[i.min(n - 1)].f();
     let (ll, rr) = (l.saturating_sub(2), r + 2);
     let mut stepped = false;
-    if at(ll) > level || at(rr) > level {
+    if shoulders && (at(ll) > level || at(rr) > level) {
         let shoulder = at(ll).min(at(ll.saturating_sub(1))).max(at(rr).min(at(rr + 1)));
         stepped = shoulder - high > floor;
         if stepped {
@@ -2736,6 +2771,32 @@ mod tests {
             let beyond = (30..60).filter(|&y| out.u[y].is_finite()).count();
             assert_eq!(beyond, 0, "{m:?}: {beyond} samples past the line's end");
         }
+    }
+
+    #[test]
+    fn a_line_one_dark_sample_from_the_prints_far_edge_is_found() {
+        // The hard phantom's print at 320x240 in grey, frame 58 of cam2: the line lies on the
+        // print (18) 1.8-2.2 px from its far edge, where a surface brighter than the line begins
+        // (60), with no run elsewhere in the frame to follow. One dark sample parts the line from
+        // that surface's ramp: that sample is the flank on its side (`SHORT_DARK_FLANK`), found
+        // where the line stands `STRIPE_RETRY` times `min_strength` over the lower of the two
+        // samples beyond it. Before, with two dark samples needed a side: 0, 0, 0 and 27 rows.
+        let smooth = |x: f64| 1.0 / (1.0 + (-x / 0.4).exp());
+        let edge = |y: u32| 60.0 + 0.05 * f64::from(y);
+        let surfaces =
+            |y: u32, a: f64| 18.0 + 42.0 * smooth(a + 0.5 - edge(y)) + 40.0 * smooth(edge(y) - 12.0 - (a + 0.5));
+        for (amp, width, gap, least) in
+            [(40.0, 1.6, 1.8, 20), (40.0, 1.6, 2.0, 45), (40.0, 1.6, 2.2, 55), (30.0, 1.8, 2.2, 40)]
+        {
+            let centre = |y: u32| edge(y) - gap;
+            let top = box_line(-0.5, 0.5, 0.0, width);
+            let mut img = image_from(120, 60, |y, a, b| surfaces(y, a) + amp * box_line(a, b, centre(y), width) / top);
+            add_noise(&mut img, 1.5, 71);
+            let what = format!("a line {amp} levels over the print, {width} px wide, {gap} px from its edge");
+            assert_found_in_rows(&img, centre, least, 0.15, &what);
+        }
+        // The print between its two brighter surfaces, without the line: nothing.
+        assert_no_line(surfaces, 73);
     }
 
     #[test]

@@ -118,7 +118,9 @@ pub(super) fn extend(
 ) {
     let mut list = runs(line, range.clone(), cfg.max_jump_px);
     if list.len() <= 1 && list.first().is_none_or(|r| r.first == range.start && r.last + 1 == range.end) {
-        return; // one run over the whole range, or none: nothing to extend
+        // One run over the whole range, or none: nothing to extend beyond the ends.
+        fill_gaps(line, cfg, &list, &mut probe);
+        return;
     }
     // Which run holds each sample (by rank, longest first), so that a longer run keeps its own.
     list.sort_by(|a, b| b.count.cmp(&a.count).then(a.first.cmp(&b.first)));
@@ -157,6 +159,59 @@ pub(super) fn extend(
                         break;
                     }
                 }
+            }
+        }
+    }
+    // The runs again (the extension joins and lengthens them), where any gap could lie inside one.
+    if has_short_gap(line, range.clone()) {
+        let list = runs(line, range, cfg.max_jump_px);
+        fill_gaps(line, cfg, &list, &mut probe);
+    }
+}
+
+/// Whether `line` misses at most `MAX_GAP` samples in a row somewhere in `range` between two
+/// found samples (a gap that a run may hold).
+fn has_short_gap(line: &LaserLine, range: Range<u32>) -> bool {
+    let across = match line.orientation {
+        super::Orientation::Vertical => &line.u,
+        super::Orientation::Horizontal => &line.v,
+    };
+    let mut last = None::<usize>;
+    for (i, x) in across.iter().enumerate().take(range.end as usize).skip(range.start as usize) {
+        if x.is_finite() {
+            if last.is_some_and(|l| i - l > 1 && i - l <= MAX_GAP as usize + 1) {
+                return true;
+            }
+            last = Some(i);
+        }
+    }
+    false
+}
+
+/// Searches the missing samples inside every run of `list` of at least `min_run` samples (at
+/// most `MAX_GAP` in a row, the run going on past them) that are still missing, near the course
+/// between the found samples on either side: `probe` as in [`extend`], the sample held by no
+/// run. A sample found on its own inside a stretch that only the course's search finds cuts
+/// that stretch into pieces whose ends the extension reaches, but not the samples between them
+/// (the hard pyramid's line beside its dark print at 320x240).
+fn fill_gaps(
+    line: &mut LaserLine,
+    cfg: &EdgeConfig,
+    list: &[Run],
+    probe: &mut impl FnMut(&mut LaserLine, u32, (f32, f32), u32) -> bool,
+) {
+    for r in list.iter().filter(|r| r.count >= cfg.min_run && r.count <= r.last - r.first) {
+        let mut before = r.first;
+        for s in r.first + 1..r.last {
+            if line.across(s as usize).is_finite() {
+                before = s;
+                continue;
+            }
+            let Some(after) = (s + 1..=r.last).find(|&t| line.across(t as usize).is_finite()) else { break };
+            let (a, b) = (line.across(before as usize), line.across(after as usize));
+            let f = (s - before) as f32 / (after - before) as f32;
+            if probe(line, s, (a + f * (b - a), cfg.max_jump_px), 0) {
+                before = s;
             }
         }
     }
@@ -578,6 +633,42 @@ mod tests {
             *u += shift;
         }
         l
+    }
+
+    #[test]
+    fn the_gaps_inside_a_run_are_searched_near_its_course() {
+        // A run of 60 rows with rows 20, 23, 24 and 40 missing (a sample found on its own
+        // between rows that only the course's search finds): the ends' extension never reaches
+        // them; the gap search probes each near the course between its neighbours, as held by
+        // no run, and nowhere else.
+        let mut l = line(&[2.0; 60]);
+        let missing = [20usize, 23, 24, 40];
+        for &i in &missing {
+            l.u[i] = f32::NAN;
+        }
+        let cfg = EdgeConfig::default();
+        let mut probed = Vec::new();
+        extend(&mut l, &cfg, 0..60, |line, s, (centre, radius), held| {
+            probed.push(s);
+            let truth = 100.0 + 0.1 * s as f32;
+            assert!((centre - truth).abs() < 0.01, "row {s}: course {centre} against {truth}");
+            assert_eq!((radius, held), (cfg.max_jump_px, 0), "row {s}");
+            line.u[s as usize] = truth;
+            true
+        });
+        assert_eq!(probed, missing.iter().map(|&i| i as u32).collect::<Vec<_>>());
+        assert_eq!(runs(&l, 0..60, cfg.max_jump_px), vec![Run { first: 0, last: 59, count: 60 }]);
+        // A gap wider than `MAX_GAP` parts two runs: it is the ends' extension's to search.
+        let mut l = line(&[2.0; 60]);
+        for i in 20..23 {
+            l.u[i] = f32::NAN;
+        }
+        let mut probed = Vec::new();
+        extend(&mut l, &cfg, 0..60, |_, s, _, _| {
+            probed.push(s);
+            false
+        });
+        assert!(probed.iter().all(|s| (20..23).contains(s)), "{probed:?}");
     }
 
     #[test]
