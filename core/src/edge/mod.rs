@@ -641,7 +641,7 @@ fn find_peak<S: Sample>(
     };
     // With the first flanks, the first pass's run is the half-maximum run.
     let known = (gap == gap0).then_some((lo, hi));
-    let first = judge(p, m, &f, known, cfg, (scale, saturation, true), run);
+    let first = judge::<S, true>(p, m, &f, known, cfg, (scale, saturation), run);
     // A line a pixel or two wide, clearly above its near samples, that fails with flanks `gap0`
     // out may lie in a narrow dark stripe between brighter surfaces: its background is right
     // beside it, GAP_PER_WIDTH times its width out.
@@ -681,7 +681,7 @@ fn find_peak<S: Sample>(
     let near = ((GAP_PER_WIDTH * w0).ceil() as usize).clamp(1, max_hw);
     let beside = background(p, m, near, flank)
         .filter(|_| near < gap && clear((lo, hi)))
-        .map_or(Err(run), |f| judge(p, m, &f, None, cfg, (scale, saturation, true), run));
+        .map_or(Err(run), |f| judge::<S, true>(p, m, &f, None, cfg, (scale, saturation), run));
     // On a dark surface a few pixels from a brighter one (dark print beside bare skin under
     // room light), even the flanks `near` out reach the bright surface: the background is then
     // the dark samples between the line and it, up to the first sample above the half maximum.
@@ -702,7 +702,7 @@ fn find_peak<S: Sample>(
     beside
         .or_else(|_| {
             let f = dark_background(p, (lo, hi), flank, level).filter(|_| clear((lo, hi))).ok_or(run)?;
-            judge(p, m, &f, None, cfg, (scale, saturation, true), run)
+            judge::<S, true>(p, m, &f, None, cfg, (scale, saturation), run)
         })
         .or_else(|e| {
             dark_flanks(p, (glo, ghi), flank, dark_level)
@@ -710,7 +710,8 @@ fn find_peak<S: Sample>(
                 .and_then(|e| Some((e, dark_flanks_background(p, e, flank, SHORT_DARK_FLANK)?)))
                 .and_then(|([start, end, rstart, rend], f)| {
                     let shoulders = (end - start).min(rend - rstart) >= DARK_FLANK;
-                    judge(p, m, &f, None, cfg, (scale, saturation, shoulders), run).ok()
+                    let judge = if shoulders { judge::<S, true> } else { judge::<S, false> };
+                    judge(p, m, &f, None, cfg, (scale, saturation), run).ok()
                 })
                 .filter(|pk| pk.width <= cfg.narrow_width_px)
                 .map(|pk| Peak { fallback: Some(run), ..pk })
@@ -871,16 +872,16 @@ const SHORT_DARK_FLANK: usize = 1;
 /// The tests of a peak at `m` against its flanks `f`, and its centre: too weak for the local
 /// noise, a step rather than a peak, cut off by the edge of the profile, or too wide or narrow
 /// is refused (with `run`, where the next candidate is not looked for). `known` is the
-/// half-maximum run when it is already known. `shoulders`: whether a brighter surface two or
+/// half-maximum run when it is already known. `SHOULDERS`: whether a brighter surface two or
 /// three samples beyond the half-maximum run raises the level of the centre's samples (not
 /// where the flanks end at that surface, a dark sample parting it from the line).
-fn judge<S: Sample>(
+fn judge<S: Sample, const SHOULDERS: bool>(
     p: &[S],
     m: usize,
     f: &Flanks,
     known: Option<(usize, usize)>,
     cfg: &EdgeConfig,
-    (scale, saturation, shoulders): (f32, f32, bool),
+    (scale, saturation): (f32, f32),
     run: (usize, usize),
 ) -> Result<Peak, (usize, usize)> {
     let n = p.len();
@@ -924,7 +925,7 @@ fn judge<S: Sample>(
     let at = |i: usize| p[i.min(n - 1)].f();
     let (ll, rr) = (l.saturating_sub(2), r + 2);
     let mut stepped = false;
-    if shoulders && (at(ll) > level || at(rr) > level) {
+    if SHOULDERS && (at(ll) > level || at(rr) > level) {
         let shoulder = at(ll).min(at(ll.saturating_sub(1))).max(at(rr).min(at(rr + 1)));
         stepped = shoulder - high > floor;
         if stepped {

@@ -133,6 +133,7 @@ pub(super) fn extend(
             }
         }
     }
+    let mut found = false;
     for (rank, r) in list.iter().enumerate() {
         if r.count < cfg.min_run {
             break;
@@ -152,7 +153,7 @@ pub(super) fn extend(
                 let held = list.get(owner[s as usize] as usize).map_or(0, |r| r.count);
                 if probe(line, s, (centre, radius), held) {
                     owner[s as usize] = rank;
-                    (end, misses) = (s, 0);
+                    (end, misses, found) = (s, 0, true);
                 } else {
                     misses += 1;
                     if misses > MAX_GAP {
@@ -162,8 +163,11 @@ pub(super) fn extend(
             }
         }
     }
-    // The runs again (the extension joins and lengthens them), where any gap could lie inside one.
-    if has_short_gap(line, range.clone()) {
+    // The runs again where the extension found samples (it joins and lengthens runs) and a gap
+    // could lie inside one; else the runs are those it started from.
+    if !found {
+        fill_gaps(line, cfg, &list, &mut probe);
+    } else if has_short_gap(line, range.clone()) {
         let list = runs(line, range, cfg.max_jump_px);
         fill_gaps(line, cfg, &list, &mut probe);
     }
