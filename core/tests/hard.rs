@@ -483,7 +483,8 @@ fn report() {
 /// signal-to-noise ratio there. The line's amplitude is the laser's light at the true column
 /// (within 1.5 px): the frame less the same frame rendered with the laser off, whose sensor
 /// noise is the same; the noise is the sensor's. `ALL=1`: every row the camera observes, not
-/// only the print's. `MIN_SNR`: show only missed rows at that ratio or more. `SCENE`, `W`, `RGB`,
+/// only the print's. `MIN_SNR`: show only missed rows at that ratio or more. `OFF=1`: each shown
+/// row with the laser off too. `SCENE`, `W`, `RGB`,
 /// `CAM`, `SPEED` as [`probe_scan`].
 #[test]
 #[ignore]
@@ -541,6 +542,11 @@ fn probe_dark_misses() {
                 eprintln!(
                     "frame {f} row {v}: true u {u:.1}, found {found:.1}, line {amp} levels; from x {x0}: {vals:?}"
                 );
+                // `OFF=1`: the same row with the laser off (the surfaces alone, the same noise).
+                if std::env::var("OFF").is_ok() {
+                    let off: Vec<u8> = (x0..x1).map(|x| off_v.rgb_at(x, v as u32)[0]).collect();
+                    eprintln!("  laser off: {off:?}");
+                }
             }
         }
     }
