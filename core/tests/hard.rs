@@ -248,14 +248,14 @@ fn pyramid_320x240_rgb8() {
 fn pyramid_320x240_mono8() {
     // Meets the floor's RMS (0.708 / 0.671 mm) and 0.1 % beyond 5 mm (0.015 / 0 %; 0.88 mm and
     // 0.25 % for cam1 before a bright face ending beside the line was told from the line's own
-    // light). Below it: the dark print, 83.6 / 91.1 % (82.0 / 90.4 % before a line one dark
-    // sample from a brighter surface could take that sample for its flank and the gaps inside a
-    // run were searched near its course; 73.7 / 83.1 % before a narrow peak on a
-    // run's course could continue it beside the print's edge, `course_peak`; 63.5 / 77.9 %
-    // before a peak's contrast was taken over the lowest samples beside it rather than the
-    // samples three away; 56.0 / 73.7 % before a narrow line three pixels from the print's edge
-    // could take its own dark tail for its flank; 52.1 / 71.4 % before a line in a stripe of
-    // print had only to stand 1.5 times `min_strength` over the samples beside it).
+    // light). Below it: the dark print, 83.6 / 91.1 % (82.0 / 90.4 % before a line one dark sample
+    // from a brighter surface could take that sample for its flank and the gaps inside a run were
+    // searched near its course; 73.7 / 83.1 % before a narrow peak on a run's course could
+    // continue it beside the print's edge, `course_peak`; 63.5 / 77.9 % before a peak's contrast
+    // was taken over the lowest samples beside it rather than the samples three away;
+    // 56.0 / 73.7 % before a narrow line three pixels from the print's edge could take its own
+    // dark tail for its flank; 52.1 / 71.4 % before a line in a stripe of print had only to stand
+    // 1.5 times `min_strength` over the samples beside it).
     let b = Bounds { dark_band: 0.80, ..Bounds::FLOOR_320 };
     check(&scan("pyramid", (320, 240), Encoding::Mono8, 0.070, Method::CenterOfGravity), b);
 }
@@ -280,22 +280,22 @@ fn phantom_640x480_rgb8() {
 
 #[test]
 fn phantom_320x240() {
-    // Meets the floor in colour and in grey: the dark print 97.9 / 97.2 % (96.7 / 92.6 % before
-    // a line one dark sample from a brighter surface could take that sample for its flank and
-    // the gaps inside a run were searched near its course; 94.4 / 89.6 % before a narrow peak
-    // on a run's course could continue it beside the print's edge, 90.5 / 88.4 % before a
-    // peak's contrast was taken over the lowest samples beside it, 87.0 / 81.0 % before a
-    // narrow line three pixels from the print's edge could take its own dark tail for its
-    // flank, 81.8 / 79.5 % before the last frame's line chose among a row's peaks): RMS 0.761 /
-    // 0.739 mm and 0.053 / 0.036 % beyond 5 mm in grey (0.771 / 0.740 mm and 0.074 / 0.043 %
-    // before the one-sample flank and the gaps; 0.770 / 0.739 mm and 0.070 / 0.043 % before
-    // the course's peaks; 0.766 / 0.744 mm and 0.063 / 0.053 % before the contrast's change and
-    // before a weak short run that spreads as it goes was taken for the sheet's tail), 0.717 /
-    // 0.719 mm and 0.031 / 0.045 % in colour (0.749 /
-    // 0.736 mm, 0.057 / 0.065 % in grey before a point between its grid neighbours was kept).
-    // Before the points the sheet only partly reached were rejected (`partial_sheet`): 0.814 /
-    // 0.780 mm and 0.24 / 0.14 % in grey, 0.11 / 0.21 % in colour; 0.88 / 0.86 mm and 0.41 /
-    // 0.33 % in grey before a bright face beside the line was told from it.
+    // Meets the floor in colour and in grey: the dark print 97.9 / 97.2 % (96.7 / 92.6 % before a
+    // line one dark sample from a brighter surface could take that sample for its flank and the
+    // gaps inside a run were searched near its course; 94.4 / 89.6 % before a narrow peak on a
+    // run's course could continue it beside the print's edge, 90.5 / 88.4 % before a peak's
+    // contrast was taken over the lowest samples beside it, 87.0 / 81.0 % before a narrow line
+    // three pixels from the print's edge could take its own dark tail for its flank, 81.8 / 79.5 %
+    // before the last frame's line chose among a row's peaks): RMS 0.761 / 0.739 mm and
+    // 0.053 / 0.036 % beyond 5 mm in grey (0.771 / 0.740 mm and 0.074 / 0.043 % before the
+    // one-sample flank and the gaps; 0.770 / 0.739 mm and 0.070 / 0.043 % before the course's
+    // peaks; 0.766 / 0.744 mm and 0.063 / 0.053 % before the contrast's change and before a weak
+    // short run that spreads as it goes was taken for the sheet's tail), 0.717 / 0.719 mm and
+    // 0.031 / 0.045 % in colour (0.749 / 0.736 mm, 0.057 / 0.065 % in grey before a point between
+    // its grid neighbours was kept). Before the points the sheet only partly reached were rejected
+    // (`partial_sheet`): 0.814 / 0.780 mm and 0.24 / 0.14 % in grey, 0.11 / 0.21 % in colour;
+    // 0.88 / 0.86 mm and 0.41 / 0.33 % in grey before a bright face beside the line was told from
+    // it.
     check(&scan("phantom", (320, 240), Encoding::Mono8, 0.070, Method::CenterOfGravity), Bounds::FLOOR_320);
     check(&scan("phantom", (320, 240), Encoding::Rgb8, 0.070, Method::CenterOfGravity), Bounds::FLOOR_320);
 }
@@ -328,28 +328,27 @@ fn second_surfaces_keep_the_floor_and_add_to_the_coverage() {
 
 #[test]
 fn body_320x240_mono8_meets_the_floor_but_the_hair_with_second_surfaces() {
-    // With the second surfaces' line (`second_surfaces`, where the body hides part of the
-    // table) the floor is met but for the hair: coverage 95.77 / 95.34 % (95.76 / 95.31 before
-    // a line one dark sample from a brighter surface could take that sample for its flank and
-    // the gaps inside a run were searched near its course; 95.57 / 95.17 before a narrow peak
-    // on a run's course could continue it, `course_peak`; 95.40 / 95.07 before
-    // a narrow line three pixels from a dark stripe's edge could take its own dark tail for its
-    // flank; 95.25 / 94.92 while a lone one-sided extrapolation rejected a point that the other
-    // direction's midpoint placed; 95.17 / 94.89 before a run was judged by its median width),
-    // RMS 0.650 / 0.681 mm, 0.028 / 0.022 % beyond 5 mm (0.649 / 0.681 and 0.027 / 0.022
-    // before the flank and the gaps, 0.647 / 0.680 and 0.022 / 0.022 before the course's peaks).
-    // With the first line alone (the report): coverage 95.31 / 94.89 % (95.28 / 94.86 before
-    // the flank and the gaps, 95.12 / 94.71 before the course's peaks). The hair: 49.7 / 9.3 %
-    // with the second line, 37.4 / 9.3 % with the first alone (49.7 / 7.8 and 37.5 / 7.8 before
-    // the flank and the gaps; 40.9 / 5.7 and 32.9 / 5.7 % before the course's peaks; 39.7 / 1.8 and
-    // 31.7 / 1.8 % before a peak's contrast was taken over the lowest samples beside it);
-    // most of cam2's hair line lies under a signal-to-noise ratio of 16 (`probe_dark_misses`),
-    // on the ramp up to the bright skin beside the hair, or at the head's silhouette against
-    // a brighter surface beyond it (a line at the top of a step).
-    // The scan opens with laser-off frames: a glossy highlight on the body (about 12 px wide,
-    // 25 rows) came before any frame had shown the line's width, and was placed 28 cm off the
-    // body (42 points, RMS 5.1 mm); cam2 had 0.12 % beyond 5 mm before a bright face beside the
-    // line was told from it.
+    // With the second surfaces' line (`second_surfaces`, where the body hides part of the table)
+    // the floor is met but for the hair: coverage 95.77 / 95.34 % (95.76 / 95.31 before a line one
+    // dark sample from a brighter surface could take that sample for its flank and the gaps inside
+    // a run were searched near its course; 95.57 / 95.17 before a narrow peak on a run's course
+    // could continue it, `course_peak`; 95.40 / 95.07 before a narrow line three pixels from a
+    // dark stripe's edge could take its own dark tail for its flank; 95.25 / 94.92 while a lone
+    // one-sided extrapolation rejected a point that the other direction's midpoint placed;
+    // 95.17 / 94.89 before a run was judged by its median width), RMS 0.650 / 0.681 mm,
+    // 0.028 / 0.022 % beyond 5 mm (0.649 / 0.681 and 0.027 / 0.022 before the flank and the gaps,
+    // 0.647 / 0.680 and 0.022 / 0.022 before the course's peaks). With the first line alone (the
+    // report): coverage 95.31 / 94.89 % (95.28 / 94.86 before the flank and the gaps,
+    // 95.12 / 94.71 before the course's peaks). The hair: 49.7 / 9.3 % with the second line,
+    // 37.4 / 9.3 % with the first alone (49.7 / 7.8 and 37.5 / 7.8 before the flank and the gaps;
+    // 40.9 / 5.7 and 32.9 / 5.7 % before the course's peaks; 39.7 / 1.8 and 31.7 / 1.8 % before a
+    // peak's contrast was taken over the lowest samples beside it); most of cam2's hair line lies
+    // under a signal-to-noise ratio of 16 (`probe_dark_misses`), on the ramp up to the bright skin
+    // beside the hair, or at the head's silhouette against a brighter surface beyond it (a line at
+    // the top of a step). The scan opens with laser-off frames: a glossy highlight on the body
+    // (about 12 px wide, 25 rows) came before any frame had shown the line's width, and was placed
+    // 28 cm off the body (42 points, RMS 5.1 mm); cam2 had 0.12 % beyond 5 mm before a bright face
+    // beside the line was told from it.
     let b = Bounds { dark_band: 0.0, ..Bounds::FLOOR_320 };
     check(&scan_with("body", (320, 240), Encoding::Mono8, 0.140, Method::CenterOfGravity, true), b);
 }
@@ -484,9 +483,9 @@ fn report() {
 /// signal-to-noise ratio there. The line's amplitude is the laser's light at the true column
 /// (within 1.5 px): the frame less the same frame rendered with the laser off, whose sensor
 /// noise is the same; the noise is the sensor's. `ALL=1`: every row the camera observes, not
-/// only the print's. `MIN_SNR`: show only missed rows at that ratio or more. `OFF=1`: each shown
-/// row with the laser off too. `SCENE`, `W`, `RGB`,
-/// `CAM`, `SPEED` as [`probe_scan`].
+/// only the print's. `MIN_SNR`: show only missed rows at that ratio or more. `FULL=1`: whole
+/// rows. `OFF=1`: each shown row with the laser off too. `SCENE`, `W`, `RGB`, `CAM`, `SPEED` as
+/// [`probe_scan`].
 #[test]
 #[ignore]
 fn probe_dark_misses() {
@@ -497,6 +496,9 @@ fn probe_dark_misses() {
     let mut line = LaserLine::default();
     let all = std::env::var("ALL").is_ok();
     let min_snr: f64 = std::env::var("MIN_SNR").map_or(0.0, |v| v.parse().unwrap());
+    // `FULL`: the whole row shown, else 29 samples around the true column; `OFF`: the same row
+    // with the laser off too (the surfaces alone, the same noise).
+    let (full, off_too) = (std::env::var("FULL").is_ok(), std::env::var("OFF").is_ok());
     let noise = s.settings.noise_sigma;
     // Signal-to-noise bins: under 4, 4-8, 8 (the stated ratio) to 16, 16-32, 32 and more.
     const BINS: [f64; 4] = [4.0, 8.0, 16.0, 32.0];
@@ -535,16 +537,13 @@ fn probe_dark_misses() {
             }
             if shown < limit && f64::from(amp) / noise >= min_snr {
                 shown += 1;
-                // `FULL`: the whole row, else 29 samples around the true column.
-                let full = std::env::var("FULL").is_ok();
                 let x0 = if full { 0 } else { (u as i64 - 14).max(0) as u32 };
                 let x1 = if full { h * 4 / 3 } else { (u as i64 + 15).min(i64::from(h * 4 / 3)) as u32 };
                 let vals: Vec<u8> = (x0..x1).map(|x| on_v.rgb_at(x, v as u32)[0]).collect();
                 eprintln!(
                     "frame {f} row {v}: true u {u:.1}, found {found:.1}, line {amp} levels; from x {x0}: {vals:?}"
                 );
-                // `OFF=1`: the same row with the laser off (the surfaces alone, the same noise).
-                if std::env::var("OFF").is_ok() {
+                if off_too {
                     let off: Vec<u8> = (x0..x1).map(|x| off_v.rgb_at(x, v as u32)[0]).collect();
                     eprintln!("  laser off: {off:?}");
                 }

@@ -654,32 +654,34 @@ fn find_peak<S: Sample>(
     // pixels wide, its other half would be taken for its background).
     let base = p[m.saturating_sub(2)].f().min(p[(m + 2).min(n - 1)].f());
     let (llo, lhi) = S::run(p, m, 2, S::cut(base + 0.5 * (peak - base)));
-    let clear_by = |(a, b): (usize, usize), by: f32| {
-        a >= 2 && b + 2 < n && peak - p[a - 2].f().max(p[b + 2].f()) >= by * cfg.min_strength * scale
+    // The level beside the run `(a, b)`: the higher of the samples two beyond it on each side,
+    // or (`close`) of the lower of the two samples beyond it on each side. A line a single dark
+    // sample from a brighter surface (the print's edge right beside it) stands over that dark
+    // sample, not over the surface two beyond: it is tried as a line in a stripe with that
+    // side's flank one sample long.
+    let beside = |(a, b): (usize, usize), close: bool| {
+        let (l, r) = (p[a - 2].f(), p[b + 2].f());
+        if close {
+            l.min(p[a - 1].f()).max(r.min(p[b + 1].f()))
+        } else {
+            l.max(r)
+        }
     };
-    let clear = |r| clear_by(r, NARROW_RETRY);
+    let clear_by = |(a, b): (usize, usize), by: f32, close: bool| {
+        a >= 2 && b + 2 < n && peak - beside((a, b), close) >= by * cfg.min_strength * scale
+    };
+    let clear = |r| clear_by(r, NARROW_RETRY, false);
     let runs = [(lo.min(llo), hi.max(lhi)), (lo, hi)];
-    // A line a single dark sample from a brighter surface (the print's edge right beside it)
-    // stands over the lower of the two samples beyond its run on that side, not over the
-    // second: it is tried as a line in a stripe with that side's flank one sample long.
-    let close_by = |(a, b): (usize, usize)| {
-        a >= 2
-            && b + 2 < n
-            && peak - p[a - 2].f().min(p[a - 1].f()).max(p[b + 1].f().min(p[b + 2].f()))
-                >= STRIPE_RETRY * cfg.min_strength * scale
-    };
-    let Some((glo, ghi, close)) = runs
+    let Some(((glo, ghi), close)) = [false, true]
         .into_iter()
-        .find(|&r| clear_by(r, STRIPE_RETRY))
-        .map(|(a, b)| (a, b, false))
-        .or_else(|| runs.into_iter().find(|&r| close_by(r)).map(|(a, b)| (a, b, true)))
+        .find_map(|close| runs.into_iter().find(|&r| clear_by(r, STRIPE_RETRY, close)).map(|r| (r, close)))
     else {
         return first;
     };
     let level = f0.mean + 0.5 * (peak - f0.mean);
     let w0 = crossing(p, hi + 1, hi, level) - crossing(p, lo - 1, lo, level);
     let near = ((GAP_PER_WIDTH * w0).ceil() as usize).clamp(1, max_hw);
-    let beside = background(p, m, near, flank)
+    let near_flanks = background(p, m, near, flank)
         .filter(|_| near < gap && clear((lo, hi)))
         .map_or(Err(run), |f| judge::<S, true>(p, m, &f, None, cfg, (scale, saturation), run));
     // On a dark surface a few pixels from a brighter one (dark print beside bare skin under
@@ -693,13 +695,9 @@ fn find_peak<S: Sample>(
     // peak, and even then it is a fallback that a line found otherwise in the row displaces: a
     // narrow mark on a textured floor passes the same tests (the robot's real frames lost a few
     // hundred columns when such marks were taken first).
-    let beside_dark = if close {
-        p[glo - 2].f().min(p[glo - 1].f()).max(p[ghi + 1].f().min(p[ghi + 2].f()))
-    } else {
-        p[glo - 2].f().max(p[ghi + 2].f())
-    };
+    let beside_dark = beside((glo, ghi), close);
     let dark_level = level.min(beside_dark + 0.5 * (peak - beside_dark));
-    beside
+    near_flanks
         .or_else(|_| {
             let f = dark_background(p, (lo, hi), flank, level).filter(|_| clear((lo, hi))).ok_or(run)?;
             judge::<S, true>(p, m, &f, None, cfg, (scale, saturation), run)
@@ -835,11 +833,10 @@ fn dark_flanks_background<S: Sample>(
     flank: usize,
     short: usize,
 ) -> Option<Flanks> {
-    let least = |a: usize, b: usize, c: usize, d: usize| if b - a >= d - c { DARK_FLANK } else { short };
-    let closed = |a: usize, b: usize, edge: bool, least: usize| b - a >= least && (b - a == flank || !edge);
-    if !closed(start, end, start == 0, least(start, end, rstart, rend))
-        || !closed(rstart, rend, rend == p.len(), least(rstart, rend, start, end))
-    {
+    let (left, right) = (end - start, rend - rstart);
+    let (least_l, least_r) = if left >= right { (DARK_FLANK, short) } else { (short, DARK_FLANK) };
+    let closed = |k: usize, least: usize, edge: bool| k >= least && (k == flank || !edge);
+    if !closed(left, least_l, start == 0) || !closed(right, least_r, rend == p.len()) {
         return None;
     }
     // The whole of each flank: its halves are not compared, the brighter surface is outside it.
